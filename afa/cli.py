@@ -1,0 +1,256 @@
+"""The command line: ``python -m afa ...``. The only place that calls ``asyncio.run``."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from afa.errors import AfaError, ConfigError
+
+log = logging.getLogger("afa.cli")
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_INVALID = 2
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=getattr(logging, args.log_level.upper()),
+                        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s")
+    handler: Callable[[argparse.Namespace], int] = args.handler
+    try:
+        return handler(args)
+    except KeyboardInterrupt:
+        return EXIT_OK
+    except ConfigError as exc:
+        print(str(exc), file=sys.stderr)
+        return EXIT_INVALID
+    except AfaError as exc:
+        print(f"afa: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m afa",
+        description="afa: the Architecture for Autonomy (DRDC Raptor UGV) on asyncio.")
+    parser.add_argument("--log-level", default="warning",
+                        choices=["debug", "info", "warning", "error"], help="logging level")
+    commands = parser.add_subparsers(required=True, metavar="COMMAND")
+
+    run = commands.add_parser("run", help="run the components a configuration file enables")
+    run.add_argument("config", type=Path, help="Miro XML configuration (configs/raptor.xml)")
+    run.add_argument("--sim", action="store_true", help="run against the simulated world")
+    run.add_argument("--world", type=Path, help="world file for --sim")
+    run.add_argument("--duration", type=float, help="stop after this many seconds (clock time)")
+    run.add_argument("--seed", type=int, default=0, help="random seed for the simulation")
+    run.add_argument("--fast", action="store_true",
+                     help="virtual time, as fast as possible (needs --sim)")
+    run.add_argument("--summary", type=Path, help="write a JSON run summary here")
+    run.add_argument("--strict", action="store_true",
+                     help="fail if a configured component is not implemented yet")
+    run.set_defaults(handler=_run)
+
+    config = commands.add_parser("config", help="check, show or generate configuration")
+    config_commands = config.add_subparsers(required=True, metavar="ACTION")
+    check = config_commands.add_parser("check", help="validate a configuration file")
+    check.add_argument("config", type=Path)
+    check.set_defaults(handler=_config_check)
+    show = config_commands.add_parser("show", help="print every effective parameter value")
+    show.add_argument("config", type=Path)
+    show.add_argument("--json", action="store_true", help="as {section: {instance: {parameter: value}}}")
+    show.set_defaults(handler=_config_show)
+    defaults = config_commands.add_parser("defaults", help="write a file of every component's defaults")
+    defaults.add_argument("-o", "--output", type=Path, help="file to write (default: stdout)")
+    defaults.set_defaults(handler=_config_defaults)
+
+    decode = commands.add_parser("decode", help="decode a raw device capture to JSON lines")
+    decode.add_argument("device", choices=sorted(_decoders()), help="device codec")
+    decode.add_argument("file", type=Path, help="raw capture ('-' for stdin)")
+    decode.set_defaults(handler=_decode)
+    return parser
+
+
+# -- config -----------------------------------------------------------------------------
+def _load(path: Path) -> Any:
+    from afa import registry
+    from afa.config.loader import load_configuration
+
+    registry.load_all()
+    return load_configuration(path)
+
+
+def _config_check(args: argparse.Namespace) -> int:
+    config = _load(args.config)
+    count = sum(len(sets) for sets in config.sections.values())
+    print(f"{args.config}: valid ({len(config.sections)} sections, {count} parameter sets, "
+          f"robot {config.robot!r}, {len(config.launcher.Components)} launcher entries)")
+    return EXIT_OK
+
+
+def _config_show(args: argparse.Namespace) -> int:
+    config = _load(args.config)
+    if args.json:
+        print(config.to_json())
+        return EXIT_OK
+    for section, sets in config.as_dict().items():
+        for instance, values in sets.items():
+            print(f"[{section}/{instance}]")
+            for name, value in values.items():
+                print(f"  {name} = {json.dumps(value)}")
+    return EXIT_OK
+
+
+def _config_defaults(args: argparse.Namespace) -> int:
+    from afa.config.writer import defaults_document
+
+    text = defaults_document()
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        args.output.write_text(text)
+    return EXIT_OK
+
+
+# -- decode -----------------------------------------------------------------------------
+def _decoders() -> dict[str, str]:
+    return {
+        "gps": "components.gps_sokkia.codec:GpsDecoder",
+        "imu": "components.imu.codec:ImuDecoder",
+        "mpc555": "components.mpc555.codec:Mpc555Decoder",
+        "sick": "components.nodding_laser.codec:NodScanDecoder",
+    }
+
+
+def _decode(args: argparse.Namespace) -> int:
+    import dataclasses
+    import importlib
+
+    module_name, _, class_name = _decoders()[args.device].partition(":")
+    decoder = getattr(importlib.import_module(module_name), class_name)()
+    try:
+        data = sys.stdin.buffer.read() if str(args.file) == "-" else args.file.read_bytes()
+    except OSError as exc:
+        print(f"afa decode: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+        return EXIT_INVALID
+    messages = 0
+    for offset in range(0, len(data), 4096):
+        for message in decoder.feed(data[offset:offset + 4096]):
+            messages += 1
+            record = {"type": type(message).__name__, **_jsonable(dataclasses.asdict(message))}
+            print(json.dumps(record))
+    stats = decoder.stats
+    print(json.dumps({"statistics": {"messages": messages, "checksum_failures":
+                                     stats.checksum_failures, "malformed": stats.malformed,
+                                     "bytes_skipped": stats.bytes_skipped + decoder.buffered,
+                                     "bytes": len(data)}}))
+    return EXIT_OK
+
+
+def _jsonable(value: Any) -> Any:
+    import enum
+
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, enum.Enum):
+        return value.value if isinstance(value.value, (str, int, float)) else value.name
+    if isinstance(value, bytes):
+        return value.hex()
+    return value
+
+
+# -- run --------------------------------------------------------------------------------
+def _run(args: argparse.Namespace) -> int:
+    if args.sim or args.world is not None:
+        print("afa run: --sim is not available yet: the simulated world (issue 5) has not "
+              "landed. Run without --sim to use the real devices named in the configuration.",
+              file=sys.stderr)
+        return EXIT_FAILURE
+    if args.fast:
+        print("afa run: --fast (virtual time) only makes sense with --sim or a replay; real "
+              "devices run in real time.", file=sys.stderr)
+        return EXIT_FAILURE
+    return asyncio.run(_run_system(args))
+
+
+async def _run_system(args: argparse.Namespace) -> int:
+    from afa.errors import StartupError
+    from afa.system import System
+
+    try:
+        system = System.from_xml(args.config, strict=args.strict)
+    except ConfigError:
+        raise
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, stop.set)
+        except (NotImplementedError, RuntimeError):  # pragma: no cover - non-Unix
+            pass
+    wall_start = time.monotonic()
+    clock_start = system.clock.now()
+    try:
+        async with system:
+            for note in system.notes:
+                print(f"afa: {note}", file=sys.stderr)
+            waiter = asyncio.ensure_future(stop.wait())
+            runner = asyncio.ensure_future(system.run(args.duration))
+            await asyncio.wait({waiter, runner}, return_when=asyncio.FIRST_COMPLETED)
+            for task in (waiter, runner):
+                task.cancel()
+            summary = _summary(system, clock_start, wall_start)
+    except StartupError as exc:
+        print(f"afa run: the system did not start. {exc}".replace("\n", " "), file=sys.stderr)
+        return EXIT_FAILURE
+    _print_summary(summary)
+    if args.summary is not None:
+        args.summary.write_text(json.dumps(summary, indent=2))
+    return EXIT_OK
+
+
+def _summary(system: Any, clock_start: float, wall_start: float) -> dict[str, Any]:
+    wall = time.monotonic() - wall_start
+    elapsed = system.clock.now() - clock_start
+    statistics = system.statistics()
+    health = system.health()
+    return {
+        "sim_time_s": round(elapsed, 6),
+        "wall_time_s": round(wall, 6),
+        "realtime_factor": round(elapsed / wall, 3) if wall > 0 else None,
+        "events": statistics["events"],
+        "events_dropped": statistics["events_dropped"],
+        "component_errors": {name: h.failures for name, h in health.items() if h.failures},
+        "components": {name: {"state": h.state.value, "healthy": h.healthy, "detail": h.detail,
+                              "restarts": h.restarts, "last_error": h.last_error}
+                       for name, h in health.items()},
+        "not_started": list(system.notes),
+    }
+
+
+def _print_summary(summary: dict[str, Any]) -> None:
+    events = sum(summary["events"].values())
+    print(f"ran {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s wall; "
+          f"{events} events, {summary['events_dropped']} dropped; "
+          f"{len(summary['component_errors'])} component(s) with errors")
+    for name, info in summary["components"].items():
+        flag = "ok" if info["healthy"] else f"UNHEALTHY {info['detail']}".strip()
+        print(f"  {name:24s} {info['state']:9s} restarts={info['restarts']:<3d} {flag}")

@@ -1,0 +1,192 @@
+"""Validating a Miro configuration document against the parameter models.
+
+:func:`load_configuration` reads the file (:mod:`afa.config.miro`), looks up each
+parameter set's model by its Miro type name, validates it, and checks the Launcher's
+references. Every problem is collected and reported at once, one line each::
+
+    configs/raptor.xml:57: NodLaserConfig/Laser12/Motorate: unknown parameter (did you mean 'Motorrates'?)
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from afa.config.miro import ParameterSet, Section, read_document
+from afa.config.parameters import Parameters, param, parameter_types
+from afa.errors import ConfigError
+
+__all__ = [
+    "Configuration", "load_configuration", "RobotParameters", "LauncherParameters",
+    "LauncherEntry", "DEFAULT_INSTANCE",
+]
+
+#: Key of a section's default (unnamed) parameter set in ``Configuration.sections``.
+DEFAULT_INSTANCE = "default"
+
+
+class RobotParameters(Parameters):
+    """Section ``Robot``: read first by every service (Miro::RobotParameters)."""
+
+    namespace = "Miro"
+    Name: str = param("Miro", description="The robot's name: naming context and event domain")
+
+
+class LauncherEntry(Parameters):
+    """One component the Launcher starts (seed Table 34, Figure 19)."""
+
+    namespace = "Afa"
+    Name: str = param(description="Component (process) name, as in the seed's Figure 19")
+    Type: str = param(description="Component type: a key of the afa.components registry")
+    Section: str = param("", description="Configuration section holding its parameters")
+    Instance: str = param("", description="Named instance in that section ('' = default set)")
+    Enabled: bool = param(True, description="Component is in the autolaunch group")
+    Period: float = param(0.0, unit="s", description="Delay before launching the next component (dT)")
+    Restart: bool = param(True, description="Restart the component with backoff when it fails")
+
+
+class LauncherParameters(Parameters):
+    """Section ``Launcher``: which components start, in what order, with what delay."""
+
+    namespace = "Afa"
+    Components: list[LauncherEntry] = param([], description="Components in start order")
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """A validated configuration: ``sections[section][instance]`` -> parameters."""
+
+    path: Path
+    robot: str
+    sections: dict[str, dict[str, Parameters]]
+    launcher: LauncherParameters
+
+    def parameters(self, section: str, instance: str = "") -> Parameters:
+        return self.sections[section][instance or DEFAULT_INSTANCE]
+
+    def as_dict(self) -> dict[str, dict[str, dict[str, Any]]]:
+        """``{section: {instance: {parameter: value}}}`` with every effective value."""
+        return {
+            section: {instance: p.model_dump(mode="json") for instance, p in sets.items()}
+            for section, sets in self.sections.items()
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.as_dict(), indent=2)
+
+
+def load_configuration(path: str | Path) -> Configuration:
+    """Read and validate ``path``; raises ConfigError listing every problem."""
+    document = read_document(path)
+    path = document.path
+    types = parameter_types()
+    problems: list[str] = []
+    sections: dict[str, dict[str, Parameters]] = {}
+    for section in document.sections.values():
+        validated = sections[section.name] = {}
+        for pset in _sets(section):
+            model = types.get(pset.type_name)
+            where = _where(section.name, pset.instance)
+            if model is None:
+                hint = _suggest(pset.type_name, types)
+                problems.append(f"{path}:{pset.line}: {where}: unknown parameter type "
+                                f"{pset.type_name!r}{hint}")
+                continue
+            try:
+                validated[pset.instance or DEFAULT_INSTANCE] = model.model_validate(pset.values)
+            except ValidationError as exc:
+                problems += _explain(exc, path, where, pset, model)
+
+    robot = "Miro"
+    if "Robot" in sections and DEFAULT_INSTANCE in sections["Robot"]:
+        robot_params = sections["Robot"][DEFAULT_INSTANCE]
+        robot = getattr(robot_params, "Name", robot)
+    launcher = LauncherParameters()
+    launcher_section = document.sections.get("Launcher")
+    if launcher_section is not None and DEFAULT_INSTANCE in sections.get("Launcher", {}):
+        launcher = sections["Launcher"][DEFAULT_INSTANCE]  # type: ignore[assignment]
+        problems += _check_launcher(path, launcher_section, launcher, sections)
+    if problems:
+        raise ConfigError(problems)
+    return Configuration(path, robot, sections, launcher)
+
+
+def _sets(section: Section) -> list[ParameterSet]:
+    sets = [section.default] if section.default is not None else []
+    return sets + list(section.instances.values())
+
+
+def _where(section: str, instance: str) -> str:
+    return f"{section}/{instance}" if instance else section
+
+
+def _suggest(word: str, choices: Any) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _explain(exc: ValidationError, path: Path, where: str, pset: ParameterSet,
+             model: type[Parameters]) -> list[str]:
+    lines = []
+    for error in exc.errors(include_url=False):
+        loc = tuple(error["loc"])
+        line = pset.line_of(loc)
+        dotted = ".".join(str(p) for p in loc) or "(set)"
+        if error["type"] == "extra_forbidden":
+            known = _fields_at(model, loc[:-1])
+            lines.append(f"{path}:{line}: {where}/{dotted}: unknown parameter"
+                         f"{_suggest(str(loc[-1]), known)}")
+        elif error["type"] == "missing":
+            lines.append(f"{path}:{line}: {where}/{dotted}: required parameter is missing")
+        else:
+            message = error["msg"].removeprefix("Value error, ")
+            lines.append(f"{path}:{line}: {where}/{dotted}: {message} "
+                         f"(got {error.get('input')!r})")
+    return lines
+
+
+def _fields_at(model: type[Parameters], loc: tuple[Any, ...]) -> list[str]:
+    """Field names of the (nested) model at ``loc``, for suggestions."""
+    current: Any = model
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        info = getattr(current, "model_fields", {}).get(part)
+        if info is None:
+            return []
+        annotation = info.annotation
+        args = getattr(annotation, "__args__", ())
+        current = next((a for a in (annotation, *args)
+                        if isinstance(a, type) and issubclass(a, Parameters)), None)
+        if current is None:
+            return []
+    return list(getattr(current, "model_fields", {}))
+
+
+def _check_launcher(path: Path, section: Section, launcher: LauncherParameters,
+                    sections: dict[str, dict[str, Parameters]]) -> list[str]:
+    problems = []
+    pset = section.default
+    assert pset is not None
+    names: set[str] = set()
+    for index, entry in enumerate(launcher.Components):
+        line = pset.line_of(("Components", index))
+        where = f"Launcher/Components[{index}] {entry.Name}"
+        if entry.Name in names:
+            problems.append(f"{path}:{line}: {where}: component name used twice")
+        names.add(entry.Name)
+        if not entry.Section:
+            continue
+        if entry.Section not in sections:
+            problems.append(f"{path}:{line}: {where}: section {entry.Section!r} is missing"
+                            f"{_suggest(entry.Section, sections)}")
+        elif (entry.Instance or DEFAULT_INSTANCE) not in sections[entry.Section]:
+            have = sorted(sections[entry.Section])
+            problems.append(f"{path}:{line}: {where}: instance {entry.Instance or '(default)'!r} "
+                            f"is missing from section {entry.Section!r} (it has {have})")
+    return problems

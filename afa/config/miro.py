@@ -1,0 +1,193 @@
+"""Reading Miro's XML configuration format into plain data, with source lines.
+
+Reading never validates and validation never touches the file (the pydantic-settings
+habit): :func:`read_document` turns the XML into :class:`Section` / :class:`ParameterSet`
+objects holding plain ``str`` / ``dict`` / ``list`` values plus the line of every value,
+and :mod:`afa.config.loader` validates them against parameter models.
+
+Format (``docs/configuration.md``; Miro's ``ConfigDocument.cpp``)::
+
+    <config>
+      <section name="SECTION">
+        <parameter name="NS::TypeParameters"> fields </parameter>        default set
+        <instance name="NAME" type="NS::TypeParameters"> fields </instance>  named sets
+      </section>
+    </config>
+
+A field is ``<parameter name="F" value="v"/>`` (scalar), ``<parameter name="F">`` with
+named children (struct) or with unnamed children (vector of scalars or structs).
+
+The parser is hardened: no DTD loading, no entity resolution, no network, no internal
+DTD subset (so no entity-expansion attack), and a size limit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lxml import etree
+
+from afa.errors import ConfigError
+
+__all__ = ["read_document", "MiroDocument", "Section", "ParameterSet", "MAX_FILE_BYTES"]
+
+#: Configuration files larger than this are refused (the Raptor's is ~20 kB).
+MAX_FILE_BYTES = 4 * 1024 * 1024
+
+Path_ = tuple[str | int, ...]
+
+
+@dataclass
+class ParameterSet:
+    """One parameter set: the default set of a section or a named instance."""
+
+    type_name: str
+    instance: str  # "" for the section's default set
+    line: int
+    values: dict[str, Any] = field(default_factory=dict)
+    lines: dict[Path_, int] = field(default_factory=dict)
+
+    def line_of(self, loc: Path_) -> int:
+        """The line of the deepest known prefix of ``loc``."""
+        for cut in range(len(loc), 0, -1):
+            line = self.lines.get(tuple(loc[:cut]))
+            if line is not None:
+                return line
+        return self.line
+
+
+@dataclass
+class Section:
+    name: str
+    line: int
+    default: ParameterSet | None = None
+    instances: dict[str, ParameterSet] = field(default_factory=dict)
+
+
+@dataclass
+class MiroDocument:
+    path: Path
+    sections: dict[str, Section]
+
+
+def _parser() -> etree.XMLParser:
+    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
+                           dtd_validation=False, huge_tree=False, remove_comments=True,
+                           remove_pis=True)
+
+
+def read_document(path: str | Path) -> MiroDocument:
+    """Read a Miro configuration file into plain data.
+
+    Raises :class:`~afa.errors.ConfigError` (``file:line: message``) for a missing,
+    oversized or malformed file, a DTD subset or entity, or a structural error.
+    """
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ConfigError(f"{path}:1: file is {size} bytes; the limit is {MAX_FILE_BYTES}")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"{path}:0: cannot read: {exc.strerror or exc}") from exc
+    return parse_document(data, path)
+
+
+def parse_document(data: bytes, path: Path) -> MiroDocument:
+    """Parse configuration bytes (``path`` is used in messages)."""
+    try:
+        root = etree.fromstring(data, parser=_parser())
+    except etree.XMLSyntaxError as exc:
+        raise ConfigError(f"{path}:{exc.lineno or 1}: XML syntax error: {exc.msg}") from None
+    tree = root.getroottree()
+    if tree.docinfo.internalDTD is not None:
+        raise ConfigError(f"{path}:1: a DTD internal subset is not allowed (entities and "
+                          "entity expansion are refused)")
+    for node in root.iter():
+        if isinstance(node, etree._Entity):
+            raise ConfigError(f"{path}:{node.sourceline}: entity references are not allowed")
+    if root.tag != "config":
+        raise ConfigError(f"{path}:{root.sourceline}: the root element must be <config>, "
+                          f"not <{root.tag}>")
+    sections: dict[str, Section] = {}
+    for element in root:
+        if element.tag != "section":
+            raise ConfigError(f"{path}:{element.sourceline}: expected <section>, got <{element.tag}>")
+        name = _attribute(path, element, "name")
+        if name in sections:
+            raise ConfigError(f"{path}:{element.sourceline}: section {name!r} appears twice "
+                              f"(first at line {sections[name].line})")
+        sections[name] = _read_section(path, element, name)
+    return MiroDocument(path, sections)
+
+
+def _attribute(path: Path, element: etree._Element, name: str) -> str:
+    value = element.get(name)
+    if value is None:
+        raise ConfigError(f"{path}:{element.sourceline}: <{element.tag}> needs a {name!r} attribute")
+    return value
+
+
+def _read_section(path: Path, element: etree._Element, name: str) -> Section:
+    section = Section(name, element.sourceline or 0)
+    for child in element:
+        if child.tag == "parameter":
+            if section.default is not None:
+                raise ConfigError(f"{path}:{child.sourceline}: section {name!r} has two default "
+                                  "parameter sets; use <instance> for named sets")
+            pset = ParameterSet(_attribute(path, child, "name"), "", child.sourceline or 0)
+            section.default = pset
+        elif child.tag == "instance":
+            instance = _attribute(path, child, "name")
+            if instance in section.instances:
+                raise ConfigError(f"{path}:{child.sourceline}: instance {instance!r} appears "
+                                  f"twice in section {name!r}")
+            pset = ParameterSet(_attribute(path, child, "type"), instance, child.sourceline or 0)
+            section.instances[instance] = pset
+        else:
+            raise ConfigError(f"{path}:{child.sourceline}: expected <parameter> or <instance> "
+                              f"in section {name!r}, got <{child.tag}>")
+        pset.values = _read_struct(path, child, (), pset.lines)
+    return section
+
+
+def _read_struct(path: Path, element: etree._Element, prefix: Path_,
+                 lines: dict[Path_, int]) -> dict[str, Any]:
+    values: dict[str, Any] = {}
+    for child in element:
+        if child.tag != "parameter":
+            raise ConfigError(f"{path}:{child.sourceline}: expected <parameter>, got <{child.tag}>")
+        name = child.get("name")
+        if name is None:
+            raise ConfigError(f"{path}:{child.sourceline}: a struct member needs a name")
+        if name in values:
+            raise ConfigError(f"{path}:{child.sourceline}: parameter {name!r} appears twice")
+        lines[prefix + (name,)] = child.sourceline or 0
+        values[name] = _read_value(path, child, prefix + (name,), lines)
+    return values
+
+
+def _read_value(path: Path, element: etree._Element, loc: Path_, lines: dict[Path_, int]) -> Any:
+    value = element.get("value")
+    children = list(element)
+    if value is not None:
+        if children:
+            raise ConfigError(f"{path}:{element.sourceline}: a parameter has either a value "
+                              "or children, not both")
+        return value
+    if not children:
+        return []  # an empty vector (or an empty struct; the model decides)
+    if all(c.get("name") is not None for c in children):
+        return _read_struct(path, element, loc, lines)
+    if any(c.get("name") is not None for c in children):
+        raise ConfigError(f"{path}:{element.sourceline}: mixes named (struct) and unnamed "
+                          "(vector) children")
+    items = []
+    for index, child in enumerate(children):
+        if child.tag != "parameter":
+            raise ConfigError(f"{path}:{child.sourceline}: expected <parameter>, got <{child.tag}>")
+        lines[loc + (index,)] = child.sourceline or 0
+        items.append(_read_value(path, child, loc + (index,), lines))
+    return items

@@ -1,0 +1,66 @@
+"""Parameter models: the validated, typed form of a configuration section.
+
+Each component declares one :class:`Parameters` subclass whose field names are the
+Miro parameter names exactly as the seed's Annex A prints them (``EventName``,
+``Motorrates``, ``SickLaser1_ID``) and whose defaults are the seed's defaults. Models are
+frozen and reject unknown fields. Values arrive from the XML as strings and are
+converted by pydantic, except ``bool``: Miro writes exactly ``true`` or ``false``, so
+``1`` or ``yes`` is an error here rather than a silent truth.
+
+A model is registered under its Miro type name (``Raptor::NodLaserParameters`` by
+default: ``namespace`` + class name), which is what the XML's ``<parameter name=…>`` /
+``<instance type=…>`` elements name.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+__all__ = ["Parameters", "param", "parameter_types"]
+
+_REGISTRY: dict[str, type[Parameters]] = {}
+
+
+def parameter_types() -> dict[str, type[Parameters]]:
+    """Registered parameter models by Miro type name."""
+    return dict(_REGISTRY)
+
+
+def param(default: Any = ..., *, unit: str = "", description: str = "") -> Any:
+    """Declare a parameter with its unit and the seed's description."""
+    extra: dict[str, Any] = {"unit": unit} if unit else {}
+    return Field(default, description=description, json_schema_extra=extra or None)
+
+
+class Parameters(BaseModel):
+    """Base of every parameter model."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    namespace: ClassVar[str] = "Raptor"
+    miro_type: ClassVar[str] = ""
+
+    @classmethod
+    def __pydantic_init_subclass__(cls, **kwargs: Any) -> None:
+        super().__pydantic_init_subclass__(**kwargs)
+        if "miro_type" not in cls.__dict__:
+            cls.miro_type = f"{cls.namespace}::{cls.__name__}"
+        _REGISTRY[cls.miro_type] = cls
+
+    @model_validator(mode="before")
+    @classmethod
+    def _miro_booleans(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        fields = cls.model_fields
+        for key, value in list(data.items()):
+            info = fields.get(key)
+            if info is not None and info.annotation is bool and isinstance(value, str):
+                if value not in ("true", "false"):
+                    raise ValueError(
+                        f"{key}: a bool is written exactly 'true' or 'false', not {value!r}"
+                    )
+                data[key] = value == "true"
+        return data

@@ -1,0 +1,229 @@
+"""Byte-stream transports: the seam between device drivers and the outside world.
+
+Drivers are written against :class:`ByteStream` only, so a test or the simulator swaps
+the transport and never the driver (pyserial-asyncio and httpx's ``MockTransport`` work
+the same way). Three implementations:
+
+- :func:`memory_pipe`: two connected in-memory ends, for fake devices and emulators;
+- :func:`open_serial`: a serial port through pyserial-asyncio (the only module that
+  imports pyserial);
+- :func:`open_tcp`: a TCP connection.
+
+A device is named by a :class:`DeviceSpec` (a serial port or a TCP endpoint);
+:class:`DeviceOpener` opens specs, and lets the simulator or a test install a factory
+per component name instead of the real device.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from abc import ABC, abstractmethod
+from collections import deque
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+
+from afa.errors import EDevIO, TransportClosed
+
+__all__ = [
+    "ByteStream", "MemoryByteStream", "memory_pipe", "AsyncioByteStream", "open_serial",
+    "open_tcp", "DeviceSpec", "SerialSpec", "TcpSpec", "DeviceOpener", "DeviceFactory",
+]
+
+
+class ByteStream(ABC):
+    """A bidirectional byte stream.
+
+    ``read`` returns at least one byte, or raises :class:`~afa.errors.TransportClosed`
+    at end of stream; ``write`` raises :class:`~afa.errors.EDevIO` on failure.
+    """
+
+    @abstractmethod
+    async def read(self, max_bytes: int = 4096) -> bytes: ...
+
+    @abstractmethod
+    async def write(self, data: bytes) -> None: ...
+
+    @abstractmethod
+    async def close(self) -> None: ...
+
+    @property
+    @abstractmethod
+    def closed(self) -> bool: ...
+
+    async def __aenter__(self) -> ByteStream:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+
+class _Pipe:
+    """One direction of a memory pipe."""
+
+    def __init__(self) -> None:
+        self.chunks: deque[bytes] = deque()
+        self.waiter: asyncio.Future[None] | None = None
+        self.eof = False
+
+    def wake(self) -> None:
+        waiter, self.waiter = self.waiter, None
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+
+class MemoryByteStream(ByteStream):
+    """One end of an in-memory pipe (see :func:`memory_pipe`). Writes never block."""
+
+    def __init__(self, incoming: _Pipe, outgoing: _Pipe, name: str) -> None:
+        self._in = incoming
+        self._out = outgoing
+        self._closed = False
+        self.name = name
+        self.bytes_written = 0
+
+    async def read(self, max_bytes: int = 4096) -> bytes:
+        pipe = self._in
+        while not pipe.chunks:
+            if pipe.eof or self._closed:
+                raise TransportClosed(f"{self.name}: end of stream")
+            pipe.waiter = asyncio.get_running_loop().create_future()
+            await pipe.waiter
+        chunk = pipe.chunks.popleft()
+        if len(chunk) > max_bytes:
+            pipe.chunks.appendleft(chunk[max_bytes:])
+            chunk = chunk[:max_bytes]
+        return chunk
+
+    async def write(self, data: bytes) -> None:
+        self.write_nowait(data)
+
+    def write_nowait(self, data: bytes) -> None:
+        """Synchronous write, for emulators driven from plain callbacks."""
+        if self._closed or self._out.eof:
+            raise TransportClosed(f"{self.name}: write on a closed stream")
+        if data:
+            self._out.chunks.append(bytes(data))
+            self.bytes_written += len(data)
+            self._out.wake()
+
+    async def close(self) -> None:
+        self.close_nowait()
+
+    def close_nowait(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._out.eof = True
+        self._out.wake()
+        self._in.wake()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+
+def memory_pipe(name: str = "memory") -> tuple[MemoryByteStream, MemoryByteStream]:
+    """Two connected ends: what one writes, the other reads. Closing one end makes the
+    other read end-of-stream after it has read what was already written."""
+    a_to_b, b_to_a = _Pipe(), _Pipe()
+    return (MemoryByteStream(b_to_a, a_to_b, f"{name}[host]"),
+            MemoryByteStream(a_to_b, b_to_a, f"{name}[device]"))
+
+
+class AsyncioByteStream(ByteStream):
+    """A :class:`ByteStream` over an asyncio ``StreamReader``/``StreamWriter`` pair."""
+
+    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
+                 name: str) -> None:
+        self._reader = reader
+        self._writer = writer
+        self._closed = False
+        self.name = name
+
+    async def read(self, max_bytes: int = 4096) -> bytes:
+        try:
+            data = await self._reader.read(max_bytes)
+        except (OSError, asyncio.IncompleteReadError) as exc:
+            raise EDevIO(f"{self.name}: read failed: {exc}") from exc
+        if not data:
+            raise TransportClosed(f"{self.name}: end of stream")
+        return data
+
+    async def write(self, data: bytes) -> None:
+        try:
+            self._writer.write(data)
+            await self._writer.drain()
+        except (OSError, RuntimeError) as exc:
+            raise EDevIO(f"{self.name}: write failed: {exc}") from exc
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._writer.close()
+        try:
+            await self._writer.wait_closed()
+        except (OSError, RuntimeError):
+            pass  # already broken; closing is best effort
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+
+async def open_serial(device: str, baudrate: int, **serial_options: object) -> ByteStream:
+    """Open a serial port through pyserial-asyncio; raises EDevIO if it cannot."""
+    try:
+        import serial  # noqa: F401  (pyserial's exceptions)
+        import serial_asyncio
+    except ImportError as exc:  # pragma: no cover - a dependency of the package
+        raise EDevIO("pyserial-asyncio is not installed") from exc
+    try:
+        reader, writer = await serial_asyncio.open_serial_connection(
+            url=device, baudrate=baudrate, **serial_options)
+    except (OSError, ValueError, serial.SerialException) as exc:
+        raise EDevIO(f"cannot open serial port {device} at {baudrate} baud: {exc}") from exc
+    return AsyncioByteStream(reader, writer, device)
+
+
+async def open_tcp(host: str, port: int) -> ByteStream:
+    """Connect to ``host:port``; raises EDevIO if it cannot."""
+    try:
+        reader, writer = await asyncio.open_connection(host, port)
+    except OSError as exc:
+        raise EDevIO(f"cannot connect to {host}:{port}: {exc}") from exc
+    return AsyncioByteStream(reader, writer, f"{host}:{port}")
+
+
+@dataclass(frozen=True, slots=True)
+class SerialSpec:
+    device: str
+    baudrate: int = 9600
+
+
+@dataclass(frozen=True, slots=True)
+class TcpSpec:
+    host: str
+    port: int
+
+
+DeviceSpec = SerialSpec | TcpSpec
+DeviceFactory = Callable[[DeviceSpec], Awaitable[ByteStream]]
+
+
+class DeviceOpener:
+    """Opens the device a component names, or what a test or simulator put in its place.
+
+    ``overrides`` maps a component name to an async factory receiving the spec.
+    """
+
+    def __init__(self, overrides: dict[str, DeviceFactory] | None = None) -> None:
+        self.overrides: dict[str, DeviceFactory] = dict(overrides or {})
+
+    async def open(self, component: str, spec: DeviceSpec) -> ByteStream:
+        factory = self.overrides.get(component)
+        if factory is not None:
+            return await factory(spec)
+        if isinstance(spec, SerialSpec):
+            return await open_serial(spec.device, spec.baudrate)
+        return await open_tcp(spec.host, spec.port)

@@ -1,0 +1,145 @@
+"""The clocks: virtual time jumps when idle, ordering is deterministic, timeouts fire."""
+
+import asyncio
+
+import pytest
+
+from afa import ETimeOut, VirtualClock, WallClock
+
+
+async def test_virtual_time_jumps_to_the_next_timer_without_waiting():
+    clock = VirtualClock(start=1000.0)
+    loop = asyncio.get_running_loop()
+    wall = loop.time()
+    await clock.sleep(3600.0)
+    assert clock.now() == 1000.0 + 3600.0
+    assert loop.time() - wall < 5.0  # an hour of virtual time, not of wall time
+
+
+async def test_timers_fire_in_deadline_then_creation_order():
+    clock = VirtualClock(start=0.0)
+    fired = []
+
+    async def sleeper(tag, delay):
+        await clock.sleep(delay)
+        fired.append((tag, clock.now()))
+
+    await asyncio.gather(sleeper("b", 2.0), sleeper("a", 1.0), sleeper("c", 2.0), sleeper("d", 1.0))
+    assert fired == [("a", 1.0), ("d", 1.0), ("b", 2.0), ("c", 2.0)]
+
+
+async def test_time_stands_still_while_work_is_ready():
+    clock = VirtualClock(start=0.0)
+    seen = []
+
+    async def busy():
+        for _ in range(100):
+            seen.append(clock.now())
+            await asyncio.sleep(0)
+
+    async def sleeper():
+        await clock.sleep(0.001)
+        seen.append("woke")
+
+    await asyncio.gather(busy(), sleeper())
+    assert seen.index("woke") == 100  # the timer waited until the busy task was done
+    assert all(t == 0.0 for t in seen[:100])
+
+
+async def test_periodic_is_drift_free_and_skips_missed_ticks():
+    clock = VirtualClock(start=0.0)
+    ticks = []
+    async for tick in clock.periodic(0.1):
+        ticks.append((tick, round(clock.now(), 9)))
+        if tick == 2:
+            await clock.sleep(0.35)  # fall behind by three periods
+        if len(ticks) == 5:
+            break
+    assert ticks == [(0, 0.0), (1, 0.1), (2, 0.2), (6, 0.6), (7, 0.7)]
+
+
+async def test_periodic_rejects_a_non_positive_period():
+    with pytest.raises(ValueError):
+        async for _ in VirtualClock().periodic(0):
+            pass
+
+
+async def test_timeout_raises_etimeout_which_is_a_timeouterror():
+    clock = VirtualClock(start=0.0)
+    with pytest.raises(TimeoutError) as info:
+        async with clock.timeout(2.5, "the test"):
+            await clock.sleep(100)
+    assert isinstance(info.value, ETimeOut)
+    assert "the test" in str(info.value)
+    assert clock.now() == 2.5
+
+
+async def test_timeout_does_not_fire_when_the_body_finishes_in_time():
+    clock = VirtualClock(start=0.0)
+    async with clock.timeout(5.0):
+        await clock.sleep(1.0)
+    await clock.sleep(10.0)  # the cancelled deadline must not cancel us later
+    assert clock.now() == 11.0
+    assert clock.pending == 0
+
+
+async def test_outer_cancellation_is_not_turned_into_a_timeout():
+    clock = VirtualClock(start=0.0)
+
+    async def body():
+        async with clock.timeout(10.0):
+            await clock.sleep(100)
+
+    task = asyncio.get_running_loop().create_task(body())
+    await clock.advance(1.0)
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+
+
+async def test_manual_advance_without_auto_advance():
+    clock = VirtualClock(start=0.0, auto_advance=False)
+    woke = []
+
+    async def sleeper():
+        await clock.sleep(5.0)
+        woke.append(clock.now())
+
+    task = asyncio.get_running_loop().create_task(sleeper())
+    await clock.advance(4.0)
+    assert woke == [] and clock.now() == 4.0
+    await clock.advance(1.0)
+    assert woke == [5.0]
+    await task
+
+
+async def test_wall_clock_sleeps_in_real_time_order():
+    clock = WallClock()
+    before = clock.now()
+    await clock.sleep(0.01)
+    assert clock.now() >= before
+    with pytest.raises(ETimeOut):
+        async with clock.timeout(0.01):
+            await asyncio.Event().wait()
+
+
+async def test_two_virtual_clocks_can_share_one_loop():
+    first, second = VirtualClock(start=0.0), VirtualClock(start=100.0)
+    await asyncio.gather(first.sleep(5.0), second.sleep(7.0))
+    assert (first.now(), second.now()) == (5.0, 107.0)
+
+
+async def test_settle_runs_ready_work_without_moving_time():
+    clock = VirtualClock(start=0.0)
+    done = []
+
+    async def chain(n):
+        for _ in range(n):
+            await asyncio.sleep(0)
+        done.append(n)
+
+    asyncio.get_running_loop().create_task(chain(50))
+    asyncio.get_running_loop().create_task(clock.sleep(10.0))
+    await clock.settle()
+    assert done == [50]
+    assert clock.now() == 0.0
