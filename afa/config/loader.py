@@ -110,7 +110,10 @@ def load_configuration(path: str | Path) -> Configuration:
     launcher_section = document.sections.get("Launcher")
     if launcher_section is not None and DEFAULT_INSTANCE in sections.get("Launcher", {}):
         launcher = sections["Launcher"][DEFAULT_INSTANCE]  # type: ignore[assignment]
-        problems += _check_launcher(path, launcher_section, launcher, sections)
+        present = {name: {i or DEFAULT_INSTANCE for i in [*(
+            [""] if sec.default is not None else []), *sec.instances]}
+            for name, sec in document.sections.items()}
+        problems += _check_launcher(path, launcher_section, launcher, present)
     if problems:
         raise ConfigError(problems)
     return Configuration(path, robot, sections, launcher)
@@ -169,7 +172,9 @@ def _fields_at(model: type[Parameters], loc: tuple[Any, ...]) -> list[str]:
 
 
 def _check_launcher(path: Path, section: Section, launcher: LauncherParameters,
-                    sections: dict[str, dict[str, Parameters]]) -> list[str]:
+                    sections: dict[str, set[str]]) -> list[str]:
+    """Launcher references to sections and instances present in the file (a set that
+    is present but invalid has its own message already)."""
     problems = []
     pset = section.default
     assert pset is not None

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 __all__ = ["Parameters", "param", "parameter_types"]
 
@@ -49,18 +49,12 @@ class Parameters(BaseModel):
             cls.miro_type = f"{cls.namespace}::{cls.__name__}"
         _REGISTRY[cls.miro_type] = cls
 
-    @model_validator(mode="before")
+    @field_validator("*", mode="before", check_fields=False)
     @classmethod
-    def _miro_booleans(cls, data: Any) -> Any:
-        if not isinstance(data, dict):
-            return data
-        fields = cls.model_fields
-        for key, value in list(data.items()):
-            info = fields.get(key)
-            if info is not None and info.annotation is bool and isinstance(value, str):
-                if value not in ("true", "false"):
-                    raise ValueError(
-                        f"{key}: a bool is written exactly 'true' or 'false', not {value!r}"
-                    )
-                data[key] = value == "true"
-        return data
+    def _miro_booleans(cls, value: Any, info: ValidationInfo) -> Any:
+        field = cls.model_fields.get(info.field_name or "")
+        if field is not None and field.annotation is bool and isinstance(value, str):
+            if value not in ("true", "false"):
+                raise ValueError(f"a bool is written exactly 'true' or 'false', not {value!r}")
+            return value == "true"
+        return value

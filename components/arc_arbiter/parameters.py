@@ -1,0 +1,54 @@
+"""Arc Arbiter parameters: seed Table A.12, section ``ArcArbiter``.
+
+A vote is stale ``StaleVoteTimeSec`` seconds plus ``StaleVoteTimeUSec`` microseconds
+after its time stamp (a ``TimeIDL {sec, usec}`` split, 1.5 s by default).
+
+Units: ``-`` marks names, ``1`` a dimensionless weight.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import Field
+
+from afa.config.parameters import Parameters, param
+
+__all__ = ["ArcArbiterParameters"]
+
+Weight = Annotated[float, Field(ge=0)]
+
+
+class ArcArbiterParameters(Parameters):
+    """Weighted arc votes, vetoes and maximum speed into one command (seed Table A.12)."""
+
+    ObsWeight: Weight = param(
+        1.0, unit="1",
+        description="The importance of Obstacle Avoidance's votes (1 being standard)")
+    PursuitWeight: Weight = param(1.0, unit="1",
+                                  description="The importance of Pure Pursuit's votes")
+    PlannerWeight: Weight = param(1.0, unit="1",
+                                  description="The importance of Find Path's votes")
+    LaserSafetyWeight: Weight = param(
+        1.0, unit="1", description="The importance of Obstacle Detections's votes")
+    TransVelocitySetPoint: Annotated[float, Field(ge=0)] = param(
+        0.5, unit="m/s", description="The maximum allowed vehicle speed (m/s)")
+    StaleVoteTimeSec: Annotated[int, Field(ge=0)] = param(
+        1, unit="s",
+        description="How long to hang on to a vote before considering it stale (whole "
+                    "seconds part)")
+    StaleVoteTimeUSec: Annotated[int, Field(ge=0, le=999999)] = param(
+        500000, unit="us",
+        description="How long to hang on to a vote before considering it stale "
+                    "(microseconds part)")
+    VoteEventName: str = param("ArcVote", unit="-",
+                               description="afa addition: subscribed ArcVote event name")
+    VehicleControlName: str = param(
+        "RaptorMotion", unit="-",
+        description="afa addition: name of the Vehicle Control interface whose setVelocity "
+                    "the arbiter calls (RaptorCommandConfig's RaptorMotionEvent)")
+
+    @property
+    def stale_vote_time(self) -> float:
+        """The stale-vote age in seconds (StaleVoteTimeSec + StaleVoteTimeUSec / 1e6)."""
+        return self.StaleVoteTimeSec + self.StaleVoteTimeUSec / 1_000_000

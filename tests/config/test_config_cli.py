@@ -1,0 +1,155 @@
+"""``python -m afa config ...``: check, show, defaults, and one-line errors for bad files."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from test_annex_a import NA, TABLES
+
+from afa.cli import main
+from afa.config.loader import load_configuration
+from afa.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[2]
+RAPTOR = ROOT / "configs" / "raptor.xml"
+
+
+def run_cli(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_check_accepts_the_raptor_file(capsys):
+    code, out, err = run_cli(capsys, "config", "check", str(RAPTOR))
+    assert code == 0, err
+    assert "valid" in out and "'Raptor'" in out
+
+
+def test_show_json_holds_every_annex_a_parameter_with_the_seed_value(capsys):
+    code, out, _ = run_cli(capsys, "config", "show", str(RAPTOR), "--json")
+    assert code == 0
+    shown = json.loads(out)
+    for table, _model, _type, section, instance, rows in TABLES:
+        values = shown[section][instance or "default"]
+        for name, _seed_text, expected in rows:
+            assert name in values, f"{table} {name} missing from config show"
+            if expected is not NA:
+                assert values[name] == expected, f"{table} {name}: {values[name]!r}"
+    assert shown["Robot"]["default"]["Name"] == "Raptor"
+
+
+def test_show_text_lists_sections(capsys):
+    code, out, _ = run_cli(capsys, "config", "show", str(RAPTOR))
+    assert code == 0
+    assert "[NodLaserConfig/Laser12]" in out and "Motorrates = 15.0" in out
+
+
+def test_defaults_writes_a_file_that_validates(tmp_path, capsys):
+    target = tmp_path / "defaults.xml"
+    code, _, _ = run_cli(capsys, "config", "defaults", "-o", str(target))
+    assert code == 0
+    config = load_configuration(target)
+    assert config.parameters("NodLaser").Motorrates == 15.0
+    assert config.parameters("ArcArbiter").StaleVoteTimeUSec == 500000
+
+
+def mutate(tmp_path, old, new, count=1):
+    text = RAPTOR.read_text()
+    assert text.count(old) >= count, old
+    path = tmp_path / "bad.xml"
+    path.write_text(text.replace(old, new, count))
+    return path, text.split(old)[0].count("\n") + 1
+
+
+BAD_CASES = {
+    "syntax error": ('<parameter name="Motorrates" value="15"/>',
+                     '<parameter name="Motorrates" value="15">', "XML syntax error"),
+    "unknown parameter": ('name="Motorrates"', 'name="Motorate"',
+                          "unknown parameter (did you mean 'Motorrates'?)"),
+    "wrong type": ('<parameter name="Port" value="24750"/>',
+                   '<parameter name="Port" value="twenty"/>', "Port"),
+    "1 for a bool": ('<parameter name="Notify" value="true"/>',
+                     '<parameter name="Notify" value="1"/>', "exactly 'true' or 'false'"),
+    "missing instance": ('<parameter name="Instance" value="Laser12"/>',
+                         '<parameter name="Instance" value="Laser13"/>',
+                         "instance 'Laser13' is missing from section 'NodLaserConfig'"),
+    "unknown type": ('type="Raptor::NodLaserParameters"', 'type="Raptor::NodLazerParameters"',
+                     "did you mean 'Raptor::NodLaserParameters'"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CASES))
+def test_bad_files_give_exit_2_and_file_line_messages(case, tmp_path, capsys):
+    old, new, expected = BAD_CASES[case]
+    path, line = mutate(tmp_path, old, new)
+    code, out, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2
+    assert out == ""
+    assert "Traceback" not in err
+    messages = err.strip().splitlines()
+    assert len(messages) == 1, messages
+    assert messages[0].startswith(f"{path}:")
+    assert expected in messages[0]
+    if case not in ("syntax error", "missing instance"):
+        assert messages[0].startswith(f"{path}:{line}:"), (messages[0], line)
+
+
+def test_errors_name_section_instance_and_parameter(tmp_path):
+    path, line = mutate(tmp_path, '<parameter name="HighAngle" value="-10"/>',
+                        '<parameter name="HighAngle" value="up"/>', count=2)
+    with pytest.raises(ConfigError) as info:
+        load_configuration(path)
+    assert info.value.problems[0].startswith(f"{path}:{line}: NodLaserConfig/Laser11/HighAngle:")
+
+
+ENTITY_BOMB = """<?xml version="1.0"?>
+<!DOCTYPE config [
+ <!ENTITY a "aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa">
+ <!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">
+ <!ENTITY c "&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;">
+ <!ENTITY d "&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;">
+]>
+<config><section name="Robot"><parameter name="Miro::RobotParameters">
+<parameter name="Name" value="&d;&d;&d;&d;&d;&d;&d;&d;&d;&d;"/></parameter></section></config>
+"""
+
+EXTERNAL_ENTITY = """<?xml version="1.0"?>
+<!DOCTYPE config [ <!ENTITY secret SYSTEM "file:///etc/passwd"> ]>
+<config><section name="Robot"><parameter name="Miro::RobotParameters">
+<parameter name="Name" value="&secret;"/></parameter></section></config>
+"""
+
+
+@pytest.mark.parametrize("document", [ENTITY_BOMB, EXTERNAL_ENTITY], ids=["bomb", "external"])
+def test_entities_and_dtds_are_refused(document, tmp_path, capsys):
+    path = tmp_path / "evil.xml"
+    path.write_text(document)
+    code, out, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2
+    assert err.startswith(f"{path}:") and len(err.strip().splitlines()) == 1
+    assert "root:" not in err  # /etc/passwd was not read into the message
+
+
+def test_oversized_files_are_refused(tmp_path, capsys):
+    path = tmp_path / "huge.xml"
+    path.write_bytes(b"<config>" + b" " * (5 * 1024 * 1024) + b"</config>")
+    code, _, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2 and "limit" in err
+
+
+def test_a_missing_file_is_a_clean_error(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "config", "check", str(tmp_path / "none.xml"))
+    assert code == 2 and "cannot read" in err and "Traceback" not in err
+
+
+def test_the_real_command_line_exit_codes(tmp_path):
+    ok = subprocess.run([sys.executable, "-m", "afa", "config", "check", str(RAPTOR)],
+                        capture_output=True, text=True, timeout=60)
+    assert ok.returncode == 0, ok.stderr
+    path, _ = mutate(tmp_path, 'name="Motorrates"', 'name="Motorate"')
+    bad = subprocess.run([sys.executable, "-m", "afa", "config", "check", str(path)],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
