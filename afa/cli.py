@@ -74,6 +74,10 @@ def _parser() -> argparse.ArgumentParser:
     defaults.add_argument("-o", "--output", type=Path, help="file to write (default: stdout)")
     defaults.set_defaults(handler=_config_defaults)
 
+    reference = config_commands.add_parser("reference",
+                                           help="print the parameter reference (docs/parameters.md)")
+    reference.set_defaults(handler=_config_reference)
+
     decode = commands.add_parser("decode", help="decode a raw device capture to JSON lines")
     decode.add_argument("device", choices=sorted(_decoders()), help="device codec")
     decode.add_argument("file", type=Path, help="raw capture ('-' for stdin)")
@@ -119,6 +123,13 @@ def _config_defaults(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
     else:
         args.output.write_text(text)
+    return EXIT_OK
+
+
+def _config_reference(args: argparse.Namespace) -> int:
+    from afa.config.reference import reference_markdown
+
+    sys.stdout.write(reference_markdown())
     return EXIT_OK
 
 
