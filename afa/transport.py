@@ -113,7 +113,9 @@ class MemoryByteStream(ByteStream):
         if self._closed:
             return
         self._closed = True
-        self._out.eof = True
+        self._out.eof = True  # the peer reads what was written, then end of stream
+        self._in.eof = True  # the peer's writes fail from now on
+        self._in.chunks.clear()
         self._out.wake()
         self._in.wake()
 
