@@ -19,8 +19,9 @@ from __future__ import annotations
 import asyncio
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass
+from typing import Any
 
 from afa.errors import EDevIO, TransportClosed
 
@@ -213,19 +214,89 @@ DeviceSpec = SerialSpec | TcpSpec
 DeviceFactory = Callable[[DeviceSpec], Awaitable[ByteStream]]
 
 
+class _SharedPort:
+    """One real connection shared by several components (the Raptor's Wheel Odometry
+    and Vehicle Control both talk to the MPC555 on one serial port).
+
+    Every tap reads everything the device sends (each component's decoder ignores the
+    messages that are not its own); writes from any tap go to the device. When the
+    device fails, every tap sees end of stream; the next open reopens the device.
+    """
+
+    def __init__(self, open_real: Callable[[], Awaitable[ByteStream]], name: str) -> None:
+        self._open_real = open_real
+        self._name = name
+        self._real: ByteStream | None = None
+        self._taps: list[tuple[MemoryByteStream, MemoryByteStream]] = []
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._lock = asyncio.Lock()
+
+    async def open(self) -> ByteStream:
+        async with self._lock:
+            if self._real is None or self._real.closed:
+                self._real = await self._open_real()
+                self._own(self._fan_out(self._real))
+            host, inner = memory_pipe(self._name)
+            self._taps.append((host, inner))
+            self._own(self._forward_writes(host, inner, self._real))
+            return host
+
+    def _own(self, coroutine: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.get_running_loop().create_task(coroutine, name=f"afa-shared:{self._name}")
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _fan_out(self, real: ByteStream) -> None:
+        try:
+            while True:
+                data = await real.read()
+                for host, inner in list(self._taps):
+                    if inner.closed or host.closed:
+                        self._taps.remove((host, inner))
+                        continue
+                    inner.write_nowait(data)
+                if not self._taps:
+                    break
+        except EDevIO:
+            pass
+        finally:
+            for _host, inner in self._taps:
+                inner.close_nowait()
+            self._taps.clear()
+            await real.close()
+
+    async def _forward_writes(self, host: MemoryByteStream, inner: MemoryByteStream,
+                              real: ByteStream) -> None:
+        try:
+            while True:
+                await real.write(await inner.read())
+        except EDevIO:
+            inner.close_nowait()
+        if (host, inner) in self._taps:
+            self._taps.remove((host, inner))
+        if not self._taps:  # the last user closed its end: release the device
+            await real.close()
+
+
 class DeviceOpener:
     """Opens the device a component names, or what a test or simulator put in its place.
 
-    ``overrides`` maps a component name to an async factory receiving the spec.
+    ``overrides`` maps a component name to an async factory receiving the spec. Two
+    components naming the same serial device share one connection.
     """
 
     def __init__(self, overrides: dict[str, DeviceFactory] | None = None) -> None:
         self.overrides: dict[str, DeviceFactory] = dict(overrides or {})
+        self._shared: dict[str, _SharedPort] = {}
 
     async def open(self, component: str, spec: DeviceSpec) -> ByteStream:
         factory = self.overrides.get(component)
         if factory is not None:
             return await factory(spec)
         if isinstance(spec, SerialSpec):
-            return await open_serial(spec.device, spec.baudrate)
+            port = self._shared.get(spec.device)
+            if port is None:
+                port = self._shared[spec.device] = _SharedPort(
+                    lambda: open_serial(spec.device, spec.baudrate), spec.device)
+            return await port.open()
         return await open_tcp(spec.host, spec.port)

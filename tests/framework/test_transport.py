@@ -110,3 +110,33 @@ async def test_device_opener_prefers_overrides():
     assert await opener.open("Gps", SerialSpec("/dev/ttyS0", 9600)) is host
     with pytest.raises(EDevIO):
         await opener.open("Laser", TcpSpec("127.0.0.1", 1))
+
+
+async def test_two_components_on_one_serial_port_share_the_connection():
+    import tty
+
+    controller, worker = os.openpty()
+    tty.setraw(controller)
+    path = os.ttyname(worker)
+    opener = DeviceOpener()
+    odometry = await opener.open("RaptorOdometryService", SerialSpec(path, 115200))
+    control = await opener.open("RaptorService", SerialSpec(path, 115200))
+    loop = asyncio.get_running_loop()
+    try:
+        os.write(controller, b"report")
+        for tap in (odometry, control):
+            data = b""
+            while len(data) < 6:
+                data += await tap.read()
+            assert data == b"report"  # both components see every byte the device sends
+        await control.write(b"cmd-a")
+        await odometry.write(b"cmd-b")
+        received = b""
+        while len(received) < 10:
+            received += await loop.run_in_executor(None, os.read, controller, 100)
+        assert sorted([received[:5], received[5:]]) == [b"cmd-a", b"cmd-b"]
+    finally:
+        await odometry.close()
+        await control.close()
+        os.close(controller)
+        os.close(worker)
