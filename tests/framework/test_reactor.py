@@ -16,7 +16,7 @@ from afa import (
     System,
     VirtualClock,
 )
-from afa.testing import DeviceSwitch, serve, until
+from afa.testing import FakeDevice, serve, until
 from idl._base import IDLModel, field
 
 
@@ -94,24 +94,26 @@ class Counter(PublishServerReactor[int]):
         self.out.publish(Value(n=message))
 
 
-async def talker(stream, clock, first=0, period=0.1):
-    n = first
-    try:
+class Talker(FakeDevice):
+    """Sends ``$VAL,n`` every 0.1 s, counting from ``first``."""
+
+    def __init__(self, clock, first=0):
+        super().__init__(clock)
+        self.next = first
+
+    async def produce(self, stream):
         while True:
-            await stream.write(frame(n))
-            n += 1
-            await clock.sleep(period)
-    except EDevIO:
-        return
+            await stream.write(frame(self.next))
+            self.next += 1
+            await self.clock.sleep(0.1)
 
 
 async def test_a_lost_device_is_reconnected_and_the_rest_keeps_running():
     clock = VirtualClock(start=0.0)
-    switch = DeviceSwitch(lambda stream: talker(stream, clock), "counter")
-    other = DeviceSwitch(lambda stream: talker(stream, clock, first=1000), "other")
+    switch, other = Talker(clock), Talker(clock, first=1000)
     counter, bystander = Counter("Counter"), Counter("Bystander")
     system = System([counter, bystander], clock=clock,
-                    devices={"Counter": switch, "Bystander": other})
+                    devices={"Counter": switch.factory(), "Bystander": other.factory()})
     async with system:
         values = system.channel.subscribe("Raptor", "Value", maxsize=10_000)
         await clock.advance(1.0)

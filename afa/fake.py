@@ -1,0 +1,114 @@
+"""Fake devices: the device side of a byte protocol, for tests and the simulator.
+
+A :class:`FakeDevice` plays a real device over a :class:`~afa.transport.ByteStream`: it
+decodes the host's commands with the device-side decoder of the component's codec and
+produces the device's output (periodic reports, replies) with its encoders. Tests put
+it on an in-memory pipe in place of the serial port or socket; the simulator feeds it
+ground truth from the simulated world. The driver cannot tell.
+
+``device.factory()`` is what ``System(devices={name: ...})`` takes: each open makes a
+fresh pipe, serves the device end in a task the fake owns, and returns the host end.
+``unplug()`` / ``plug()`` simulate a lost and returning device.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from typing import Generic, TypeVar
+
+from afa.clock import Clock
+from afa.codec import StreamDecoder
+from afa.errors import EDevIO
+from afa.transport import ByteStream, DeviceSpec, MemoryByteStream, memory_pipe
+
+__all__ = ["FakeDevice"]
+
+C = TypeVar("C")
+log = logging.getLogger("afa.fake")
+
+
+class FakeDevice(Generic[C]):
+    """Base of fake devices. Override :meth:`command_decoder`, :meth:`on_command` and
+    :meth:`produce` (any of them may stay empty)."""
+
+    name = "device"
+
+    def __init__(self, clock: Clock) -> None:
+        self.clock = clock
+        self.commands: list[C] = []
+        self.plugged = True
+        self.opens = 0
+        self._streams: list[MemoryByteStream] = []
+        self._tasks: set[asyncio.Task[None]] = set()
+
+    # -- hooks ---------------------------------------------------------------------------
+    def command_decoder(self) -> StreamDecoder[C] | None:
+        """A fresh device-side decoder of host commands (None: the device ignores input)."""
+        return None
+
+    async def on_command(self, command: C, stream: ByteStream) -> None:
+        """React to one host command (reply, change mode)."""
+
+    async def produce(self, stream: ByteStream) -> None:
+        """Write the device's unsolicited output (periodic reports) until cancelled."""
+        await asyncio.Event().wait()
+
+    # -- serving -------------------------------------------------------------------------
+    async def serve(self, stream: ByteStream) -> None:
+        """Play the device on ``stream`` until it closes."""
+        decoder = self.command_decoder()
+        try:
+            async with asyncio.TaskGroup() as tasks:
+                producer = tasks.create_task(self.produce(stream))
+                if decoder is not None:
+                    while True:
+                        data = await stream.read()
+                        for command in decoder.feed(data):
+                            self.commands.append(command)
+                            await self.on_command(command, stream)
+                else:
+                    await producer
+        except* EDevIO:
+            pass  # the host went away: this connection is over
+        finally:
+            await stream.close()
+
+    def factory(self) -> Callable[[DeviceSpec], Awaitable[ByteStream]]:
+        """A device factory for ``System(devices=...)``."""
+
+        async def open_device(spec: DeviceSpec) -> ByteStream:
+            if not self.plugged:
+                raise EDevIO(f"{self.name}: no such device")
+            host, device = memory_pipe(self.name)
+            self.opens += 1
+            self._streams.append(device)
+            task = asyncio.get_running_loop().create_task(self.serve(device),
+                                                          name=f"fake:{self.name}")
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+            return host
+
+        return open_device
+
+    def unplug(self) -> None:
+        """Drop every connection and refuse new ones until :meth:`plug`."""
+        self.plugged = False
+        for stream in self._streams:
+            stream.close_nowait()
+        self._streams.clear()
+
+    def plug(self) -> None:
+        self.plugged = True
+
+    async def aclose(self) -> None:
+        """Stop serving (end of a test or simulation)."""
+        self.unplug()
+        for task in list(self._tasks):
+            task.cancel()
+        for task in list(self._tasks):
+            try:
+                await task
+            except (asyncio.CancelledError, Exception):  # already reported by serve()
+                pass
