@@ -1,0 +1,173 @@
+"""Planning and goal-seeking structs: plan points, waypoints, arc votes (§3.2.3, §3.3).
+
+Planning grid convention (shared with :class:`idl.maps.PlanMapEventIDL` and the
+GlobalMap interface): the *planning frame* is measured in grid cells, so the
+GlobalMap's world-to-planning transform includes the scale 1/gridsize; node
+``(x, y)`` is the cell whose planning coordinates lie in ``[x, x+1) × [y, y+1)``, i.e.
+``PlanMapEventIDL`` layers at ``[x, y]``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+import numpy as np
+from pydantic import PlainSerializer, model_validator
+
+from idl._base import Array, field
+from idl.common import TimeIDL, _Struct
+
+__all__ = [
+    "PlanPointIDL",
+    "PlanningBoundaryIDL",
+    "WaypointIDL",
+    "WaypointGroupIDL",
+    "ArcVoteIDL",
+    "IMPASSABLE",
+    "Cost",
+]
+
+#: The cost of a cell that cannot be entered.
+IMPASSABLE = math.inf
+
+
+def _cost_to_json(value: float) -> float | str:
+    return value if math.isfinite(value) else str(value)
+
+
+#: A traversal cost: a float that may be ``inf``. JSON carries ``inf`` as the string
+#: ``"inf"`` (which pydantic reads back as a float), so a cost survives any JSON
+#: serialiser, including ones outside this package (a poll result crossing processes).
+Cost = Annotated[float, PlainSerializer(_cost_to_json, when_used="json")]
+
+
+class PlanPointIDL(_Struct):
+    """One node of the GlobalMap planning grid (seed Table 18).
+
+    Costs are per-cell traversal costs: entering a cell of cost c over a step of
+    length s costs c·s. They are at least 1 (so FindPath's octile heuristic stays
+    admissible) or ``inf`` (:data:`IMPASSABLE`). A query such as ``valid(p)`` needs
+    only ``x`` and ``y``; the costs then keep their defaults.
+    """
+
+    x: int = field(unit="1", description="planning grid index along the planning x axis")
+    y: int = field(unit="1", description="planning grid index along the planning y axis")
+    aPrioriCost: Cost = field(1.0, unit="1", ge=1.0, allow_inf_nan=True,
+                               description="a priori cost of entering the cell (≥ 1, inf "
+                                           "= impassable)")
+    sensedCost: Cost = field(1.0, unit="1", ge=1.0, allow_inf_nan=True,
+                              description="sensed cost of entering the cell (≥ 1, inf = "
+                                          "impassable)")
+    sensed: bool = field(False, unit="", description="true once sensing has observed the "
+                                                     "cell (else sensedCost is the "
+                                                     "free-space assumption)")
+
+    @model_validator(mode="after")
+    def _check(self) -> PlanPointIDL:
+        for name in ("aPrioriCost", "sensedCost"):
+            if math.isnan(getattr(self, name)):
+                raise ValueError(f"{name} must not be NaN")
+        return self
+
+    @property
+    def cost(self) -> float:
+        """The cost a planner uses: the sensed cost once sensed, else the a priori one."""
+        return self.sensedCost if self.sensed else self.aPrioriCost
+
+
+class PlanningBoundaryIDL(_Struct):
+    """The part of the planning grid a planner may search (§3.2.3), inclusive indices."""
+
+    minX: int = field(unit="1", description="smallest x index inside the boundary")
+    minY: int = field(unit="1", description="smallest y index inside the boundary")
+    maxX: int = field(unit="1", description="largest x index inside the boundary")
+    maxY: int = field(unit="1", description="largest y index inside the boundary")
+
+    @model_validator(mode="after")
+    def _check(self) -> PlanningBoundaryIDL:
+        if self.maxX < self.minX or self.maxY < self.minY:
+            raise ValueError(f"empty planning boundary x {self.minX}..{self.maxX}, "
+                             f"y {self.minY}..{self.maxY}")
+        return self
+
+    def contains(self, x: int, y: int) -> bool:
+        """True if node (x, y) lies inside the boundary."""
+        return self.minX <= x <= self.maxX and self.minY <= y <= self.maxY
+
+
+class WaypointIDL(_Struct):
+    """A GPS waypoint (seed Table 24): latitude/longitude, optional UTM, tolerance."""
+
+    latitude: float = field(unit="deg", ge=-90.0, le=90.0, allow_inf_nan=False,
+                            description="WGS84 latitude, north positive")
+    longitude: float = field(unit="deg", ge=-180.0, le=180.0, allow_inf_nan=False,
+                             description="WGS84 longitude, east positive")
+    easting: float | None = field(None, unit="m", allow_inf_nan=False,
+                                  description="UTM easting, if the operator gave one")
+    northing: float | None = field(None, unit="m", allow_inf_nan=False,
+                                   description="UTM northing, if the operator gave one")
+    tolerance: float = field(2.0, unit="m", gt=0.0, allow_inf_nan=False,
+                             description="the waypoint is reached within this distance")
+
+    @model_validator(mode="after")
+    def _check(self) -> WaypointIDL:
+        if (self.easting is None) != (self.northing is None):
+            raise ValueError("give both easting and northing, or neither")
+        return self
+
+
+class WaypointGroupIDL(_Struct):
+    """A waypoint list to follow in order (seed Table 24), optionally on patrol."""
+
+    waypoints: tuple[WaypointIDL, ...] = field((), unit="", description="waypoints in "
+                                                                         "order")
+    patrolMode: bool = field(False, unit="", description="after the last waypoint, start "
+                                                         "again from the first")
+
+
+_ArcFloat = Annotated[np.ndarray, Array("float32", (None,))]
+
+
+class ArcVoteIDL(_Struct):
+    """One behaviour's votes over the candidate arcs (seed Table 23, §3.3).
+
+    Element k of each array refers to the arc of curvature ``curvatures[k]``
+    (1/m, left turns positive, 0 = straight ahead). ``veto[k]`` forbids the arc,
+    ``vote[k]`` in 0..1 is its desirability, ``certainty[k]`` in 0..1 the behaviour's
+    belief in its data, ``maxSpeed[k]`` the highest acceptable speed on it.
+    """
+
+    time: TimeIDL = field(unit="", description="time stamp of the vote")
+    behaviour: str = field(unit="", description="the voting behaviour, e.g. PurePursuit, "
+                                                "ObstacleAvoidance, FindPath, "
+                                                "ObstacleDetection")
+    curvatures: Annotated[np.ndarray, Array("float64", (None,))] = field(
+        unit="1/m", description="(n,) arc curvatures, left positive")
+    veto: Annotated[np.ndarray, Array("bool", (None,))] = field(
+        unit="", description="(n,) true vetoes the arc")
+    vote: _ArcFloat = field(unit="1", description="(n,) desirability 0..1")
+    certainty: _ArcFloat = field(unit="1", description="(n,) belief in the data 0..1")
+    maxSpeed: _ArcFloat = field(unit="m/s", description="(n,) highest acceptable speed ≥ 0")
+
+    @model_validator(mode="after")
+    def _check(self) -> ArcVoteIDL:
+        n = self.curvatures.shape[0]
+        for name in ("veto", "vote", "certainty", "maxSpeed"):
+            if getattr(self, name).shape[0] != n:
+                raise ValueError(f"{name} has {getattr(self, name).shape[0]} entries, "
+                                 f"curvatures has {n}")
+        if not np.all(np.isfinite(self.curvatures)):
+            raise ValueError("curvatures must be finite")
+        for name in ("vote", "certainty"):
+            values = getattr(self, name)
+            if not np.all((values >= 0.0) & (values <= 1.0)):
+                raise ValueError(f"{name} must lie in 0..1")
+        if not np.all((self.maxSpeed >= 0.0) & np.isfinite(self.maxSpeed)):
+            raise ValueError("maxSpeed must be finite and ≥ 0")
+        return self
+
+    @property
+    def all_vetoed(self) -> bool:
+        """True if every arc is vetoed (a halt), or there are no arcs."""
+        return bool(np.all(self.veto))
