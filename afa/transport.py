@@ -281,18 +281,26 @@ class _SharedPort:
 class DeviceOpener:
     """Opens the device a component names, or what a test or simulator put in its place.
 
-    ``overrides`` maps a component name to an async factory receiving the spec. Two
-    components naming the same serial device share one connection.
+    ``overrides`` maps a component name to an async factory receiving the spec and
+    returning the device (a :class:`ByteStream`, or for devices that are not byte
+    streams, such as a camera, whatever the driver expects). Two components naming the
+    same serial device share one connection.
     """
 
     def __init__(self, overrides: dict[str, DeviceFactory] | None = None) -> None:
         self.overrides: dict[str, DeviceFactory] = dict(overrides or {})
         self._shared: dict[str, _SharedPort] = {}
 
-    async def open(self, component: str, spec: DeviceSpec) -> ByteStream:
+    async def open(self, component: str, spec: Any) -> Any:
+        """Open ``component``'s device: its override if one is installed, else the real
+        serial port or TCP endpoint. Other device kinds (a camera) have no real opener
+        here: their driver supplies one, or a simulator installs an override; without
+        one, EDevIO."""
         factory = self.overrides.get(component)
         if factory is not None:
             return await factory(spec)
+        if not isinstance(spec, (SerialSpec, TcpSpec)):
+            raise EDevIO(f"{component}: no device available for {spec!r}")
         if isinstance(spec, SerialSpec):
             port = self._shared.get(spec.device)
             if port is None:
