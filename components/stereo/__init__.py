@@ -1,8 +1,16 @@
 """Stereo Vision (seed §3.1.2): Digiclops disparity to 3-D points."""
 
-from afa.registry import not_implemented
+from components.stereo.backends import (
+    CameraBackend,
+    CameraModel,
+    CameraSpec,
+    DisparityFrame,
+    RecordedBackend,
+    SyntheticBackend,
+    write_recording,
+)
+from components.stereo.component import Stereo
 from components.stereo.parameters import StereoParameters
 
-Stereo = not_implemented("Stereo", StereoParameters, "Stereo Vision: device drivers")
-
-__all__ = ["Stereo", "StereoParameters"]
+__all__ = ["Stereo", "StereoParameters", "CameraBackend", "CameraModel", "CameraSpec",
+           "DisparityFrame", "RecordedBackend", "SyntheticBackend", "write_recording"]

@@ -1,0 +1,182 @@
+"""ModelServer (seed §3.2.4): the geometry database and the pose filter, served together.
+
+- Geometry: the assembly file ``ModelFileName`` (relative to the configuration's folder)
+  is loaded at start; the Platform interface answers ``getTransformation(A, B)``,
+  ``getBodyList()`` and ``getBodyFrameList(body)`` (Table 19) under every name of
+  ``OfferedNames`` whose type is ``Platform`` (``Raptor/ModelService`` by default).
+- Pose: a Subscribe-Publish Server. It subscribes to the events named in
+  ``Subscriptions`` (Gps, Imu; odometry too when listed: Table 20), feeds them to the
+  EKF (:class:`PoseFilter`) or, with ``UseRawPose``, to the unfiltered solution
+  (:class:`RawPose`), and publishes ``Pose`` (PoseTransformIDL, Table 21) under each
+  ``Publications`` name: on every input event when ``UpdatePeriod`` is 0, else every
+  ``UpdatePeriod`` ms. ``initialUTM`` is the first GPS fix (easting, northing, elevation);
+  ``HTransform`` is ^W T_V of ``Raptor:RearAxleCenter`` measured from it.
+- Sensor geometry comes from the model: the GPS antenna lever arm
+  (``GpsAntenna:PhaseCenter`` in the vehicle frame) and the IMU's mounting rotation
+  (``Imu:SensorCenter``), so the 3DM-GX1's z-down rates become the vehicle's yaw rate.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from afa import EOutOfBounds, Event, SubscribePublishServer
+from components.model_server.geometry import GeometryModel
+from components.model_server.parameters import ModelServerParameters
+from components.model_server.pose_filter import (
+    PoseFilter,
+    PoseFilterTuning,
+    PoseUnavailableError,
+    RawPose,
+    enu_attitude_from_ned,
+)
+from idl import GpsIDL, ImuIDL, Platform, PoseTransformIDL, StringSequenceIDL, TimeIDL, WheelDataIDL
+
+__all__ = ["ModelServer", "VEHICLE_FRAME", "ANTENNA_FRAME", "IMU_FRAME"]
+
+VEHICLE_FRAME = "Raptor:RearAxleCenter"
+ANTENNA_FRAME = "GpsAntenna:PhaseCenter"
+IMU_FRAME = "Imu:SensorCenter"
+
+
+class ModelServer(SubscribePublishServer):
+    """Geometry database + pose estimation (seed §3.2.4, Tables 19–21, A.8)."""
+
+    Parameters = ModelServerParameters
+    parameters: ModelServerParameters
+
+    def __init__(self, name: str, parameters: ModelServerParameters | None = None) -> None:
+        super().__init__(name, parameters)
+        self.model: GeometryModel | None = None
+        self.initial_utm: np.ndarray | None = None
+        self.inputs = {"gps": 0, "imu": 0, "odometry": 0}
+        self.poses_published = 0
+
+    # -- lifecycle ---------------------------------------------------------------------
+    async def setup(self) -> None:
+        p = self.parameters
+        path = Path(p.ModelFileName)
+        if not path.is_absolute():
+            path = self.context.base_dir / path
+        self.model = GeometryModel.load(path)
+        antenna = self.model.transformation(VEHICLE_FRAME, ANTENNA_FRAME)[:3, 3]
+        self._imu_rotation = self.model.transformation(VEHICLE_FRAME, IMU_FRAME)[:3, :3]
+        offset = (float(antenna[0]), float(antenna[1]), float(antenna[2]))
+        if p.UseRawPose:
+            self.filter: PoseFilter | RawPose = RawPose(antenna_offset=offset)
+        else:
+            self.filter = PoseFilter(PoseFilterTuning(
+                fidget_delay=p.FidgetDelay, fidget_period=p.FidgetPeriod,
+                antenna_offset=offset))
+        self.latest = self.slot("pose")
+        description = p.EventChannelDescription
+        self.publishers = [self.publisher(b.Name) for b in description.Publications]
+        for binding in description.OfferedNames:
+            if binding.Type == "Platform":
+                self.serve(Platform, binding.Name)
+        for binding in description.Subscriptions:
+            self.subscribe(binding.Name, self._integrate, maxsize=64)
+
+    async def run(self) -> None:
+        period = self.parameters.UpdatePeriod
+        if period > 0:
+            async for _ in self.clock.periodic(period / 1000.0):
+                self._publish()
+
+    # -- pose ---------------------------------------------------------------------------
+    def _integrate(self, event: Event) -> None:
+        body, t = event.body, event.time
+        if isinstance(body, GpsIDL):
+            self._on_gps(t, body)
+        elif isinstance(body, ImuIDL):
+            self._on_imu(t, body)
+        elif isinstance(body, WheelDataIDL):
+            self._on_odometry(t, body)
+        else:
+            return
+        if self.parameters.UpdatePeriod == 0:
+            self._publish()
+
+    def _on_gps(self, t: float, gps: GpsIDL) -> None:
+        self.inputs["gps"] += 1
+        if self.initial_utm is None:
+            self.initial_utm = np.array([gps.easting, gps.northing, gps.elevation])
+        track = math.radians(gps.track)
+        if isinstance(self.filter, RawPose):
+            self.filter.update_gps(t, gps.easting, gps.northing, speed=gps.horizontalSpeed,
+                                   track=track, elevation=gps.elevation)
+        else:
+            std = max(0.05, math.hypot(gps.latitudeStd, gps.longitudeStd) / math.sqrt(2))
+            self.filter.update_gps(t, gps.easting, gps.northing, std, speed=gps.horizontalSpeed,
+                                   track=track, elevation=gps.elevation)
+
+    def _on_imu(self, t: float, imu: ImuIDL) -> None:
+        self.inputs["imu"] += 1
+        roll, pitch, yaw = enu_attitude_from_ned(imu.roll, imu.pitch, imu.yaw)
+        if isinstance(self.filter, RawPose):
+            self.filter.update_imu(t, yaw=yaw, roll=roll, pitch=pitch)
+            return
+        rates = self._imu_rotation @ np.array([imu.rateX, imu.rateY, imu.rateZ])
+        self.filter.update_imu(t, float(rates[2]), roll=roll, pitch=pitch)
+
+    def _on_odometry(self, t: float, wheels: WheelDataIDL) -> None:
+        self.inputs["odometry"] += 1
+        if isinstance(self.filter, PoseFilter):
+            self.filter.update_odometry(t, wheels.leftDistance, wheels.rightDistance)
+
+    def pose(self) -> PoseTransformIDL | None:
+        """The current pose, or None before the first GPS fix."""
+        if self.initial_utm is None:
+            return None
+        try:
+            transform = self.filter.transform(self.initial_utm)
+        except PoseUnavailableError:
+            return None
+        return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()),
+                                HTransform=transform, initialUTM=self.initial_utm,
+                                poseValidFlag=bool(self.filter.pose_valid))
+
+    def _publish(self) -> None:
+        pose = self.pose()
+        if pose is None:
+            return
+        self.latest.set(pose)
+        for publisher in self.publishers:
+            publisher.publish(pose)
+        self.poses_published += 1
+
+    def statistics(self) -> dict[str, Any]:
+        stats = super().statistics()
+        stats.update({f"{k}_events": v for k, v in self.inputs.items()})
+        stats["poses_published"] = self.poses_published
+        if isinstance(self.filter, PoseFilter):
+            stats["gps_rejections"] = self.filter.gps_rejections
+        return stats
+
+    # -- Platform (Table 19) --------------------------------------------------------------
+    def _geometry(self) -> GeometryModel:
+        if self.model is None:  # pragma: no cover - served only after setup
+            raise EOutOfBounds("the geometry model is not loaded")
+        return self.model
+
+    async def getTransformation(self, A: str, B: str) -> PoseTransformIDL:
+        transform = self._geometry().transformation(A, B)
+        return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()),
+                                HTransform=transform, initialUTM=np.zeros(3),
+                                poseValidFlag=True)
+
+    async def getBodyList(self) -> StringSequenceIDL:
+        return StringSequenceIDL(values=tuple(self._geometry().bodies()))
+
+    async def getBodyFrameList(self, body: str) -> StringSequenceIDL:
+        return StringSequenceIDL(values=tuple(self._geometry().frames(body)))
+
+    async def getPose(self) -> PoseTransformIDL:
+        return self.latest.get()
+
+    async def getWaitPose(self) -> PoseTransformIDL:
+        return await self.latest.wait_next(Platform.wait_timeout)
