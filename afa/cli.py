@@ -139,7 +139,7 @@ def _decoders() -> dict[str, str]:
         "gps": "components.gps_sokkia.codec:GpsDecoder",
         "imu": "components.imu.codec:ImuDecoder",
         "mpc555": "components.mpc555.codec:Mpc555Decoder",
-        "sick": "components.nodding_laser.codec:NodScanDecoder",
+        "sick": "components.nodding_laser.codec:NodControllerDecoder",
     }
 
 

@@ -1,8 +1,10 @@
-"""Nodding Laser (seed §3.1.1): SICK LMS 211 on a nodding mount, over TCP."""
+"""Nodding Laser (seed §3.1.1): SICK LMS 211 on a nodding mount, over TCP.
 
-from afa.registry import not_implemented
+:class:`NodLaser` is the driver component (``component.py``); the fake controller
+used by tests and the simulator is ``components.nodding_laser.fake.FakeNodLaser``.
+"""
+
+from components.nodding_laser.component import NodLaser
 from components.nodding_laser.parameters import NodLaserParameters
-
-NodLaser = not_implemented("NodLaser", NodLaserParameters, "Nodding Laser driver: device drivers")
 
 __all__ = ["NodLaser", "NodLaserParameters"]

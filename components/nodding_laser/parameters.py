@@ -58,6 +58,11 @@ class NodLaserParameters(Parameters):
                     "model (docs/geometry.md); only the adaptive-nodding heuristic uses it")
     ScanDistance: Annotated[float, Field(gt=0)] = param(
         0.2, unit="m", description="Scan distance (m) - Used for adaptive nodding")
+    AdaptiveNodding: bool = param(
+        False, unit="-",
+        description="afa addition: limit the nod to MountAngle and slow it so scan lines "
+                    "land at most ScanDistance apart (components/nodding_laser/component.py "
+                    "nod_plan); the seed names the inputs but not the switch")
 
     @field_validator("Laserres")
     @classmethod
