@@ -349,9 +349,10 @@ class NodLaser(PublishServerReactor[ControllerMessage]):
         line = _ScanLine(TimeIDL.from_seconds(stamp), self.parameters.LaserID, self.frame,
                          math.radians(nod_start), math.radians(nod_end), points, valid)
         self.latest.set(line)
-        if self.events.subscribed:
-            self.events.publish(line.seq)
-            self.counters["seq_events"] += 1
+        # The sequence form is the laser's event (loggers and the run summary count it
+        # even before a map subscribes); the fixed-size form only when someone wants it.
+        self.events.publish(line.seq)
+        self.counters["seq_events"] += 1
         if self.array_events.subscribed:
             self.array_events.publish(line.laser)
             self.counters["array_events"] += 1

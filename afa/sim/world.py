@@ -1,0 +1,593 @@
+"""World files: the simulated Raptor's terrain, obstacles, start pose, mission and drive script.
+
+A world file is a small XML document (``docs/worlds.md``)::
+
+    <world name="open-field">
+      <origin latitude="50.2717" longitude="-111.1766" elevation="750.0"/>
+      <terrain width="200" depth="200" resolution="0.1" roughness="0.03" seed="7">
+        <slope east="0.02" north="0.0"/>
+      </terrain>
+      <obstacle type="box" east="30" north="5" length="2" width="2" height="1.2" heading="0"/>
+      <vehicle east="0" north="0" heading="90"/>
+      <mission patrol="false"> <waypoint east="120" north="40"/> </mission>
+      <drive> <command time="0" speed="1.5" steering="0"/> </drive>
+    </world>
+
+:func:`load_world` reads it with a hardened lxml parser (no DTD, no entities, no network,
+a size limit) into frozen dataclasses, collecting every problem as a ``file:line: message``
+line of one :class:`~afa.errors.ConfigError`.
+
+Coordinates: ``east``/``north`` metres in the local tangent plane (ENU) at the origin;
+``up`` metres along the origin's vertical above ``origin.elevation``. Headings are degrees
+clockwise from north. :class:`Origin` converts exactly between that plane and WGS84
+geodetic coordinates (via ECEF), so the conversion error is only floating point.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from lxml import etree
+
+from afa.errors import ConfigError
+
+__all__ = [
+    "World", "Origin", "TerrainSpec", "Obstacle", "ObstacleType", "VehicleStart",
+    "Waypoint", "Mission", "DriveCommand", "load_world", "parse_world",
+    "MAX_WORLD_BYTES", "WGS84_A", "WGS84_F",
+]
+
+#: World files larger than this are refused (the shipped ones are ~2 kB).
+MAX_WORLD_BYTES = 4 * 1024 * 1024
+
+#: WGS84 semi-major axis (m) and flattening (NIMA TR8350.2).
+WGS84_A = 6378137.0
+WGS84_F = 1.0 / 298.257223563
+_E2 = WGS84_F * (2.0 - WGS84_F)
+
+ObstacleType = Literal["box", "cylinder", "ditch"]
+
+
+# --------------------------------------------------------------------------- geodesy
+def _geodetic_to_ecef(lat_deg: float, lon_deg: float, h: float) -> tuple[float, float, float]:
+    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    s = math.sin(lat)
+    n = WGS84_A / math.sqrt(1.0 - _E2 * s * s)
+    return ((n + h) * math.cos(lat) * math.cos(lon),
+            (n + h) * math.cos(lat) * math.sin(lon),
+            (n * (1.0 - _E2) + h) * s)
+
+
+def _ecef_to_geodetic(x: float, y: float, z: float) -> tuple[float, float, float]:
+    # Fixed-point iteration on latitude; converges to ~1e-12 rad in a few rounds near
+    # the surface (we only ever use it within kilometres of the ellipsoid).
+    lon = math.atan2(y, x)
+    p = math.hypot(x, y)
+    lat = math.atan2(z, p * (1.0 - _E2))
+    h = 0.0
+    for _ in range(8):
+        s = math.sin(lat)
+        n = WGS84_A / math.sqrt(1.0 - _E2 * s * s)
+        h = p / math.cos(lat) - n
+        lat = math.atan2(z, p * (1.0 - _E2 * n / (n + h)))
+    s = math.sin(lat)
+    n = WGS84_A / math.sqrt(1.0 - _E2 * s * s)
+    h = p / math.cos(lat) - n
+    return math.degrees(lat), math.degrees(lon), h
+
+
+@dataclass(frozen=True)
+class Origin:
+    """The world's origin: WGS84 latitude/longitude (degrees) and ellipsoid height (m).
+
+    The local frame is the ENU tangent plane at this point, at height ``elevation``.
+    """
+
+    latitude: float
+    longitude: float
+    elevation: float = 0.0
+
+    def _basis(self) -> tuple[tuple[float, float, float], tuple[float, float, float],
+                              tuple[float, float, float]]:
+        lat, lon = math.radians(self.latitude), math.radians(self.longitude)
+        sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+        east = (-so, co, 0.0)
+        north = (-sl * co, -sl * so, cl)
+        up = (cl * co, cl * so, sl)
+        return east, north, up
+
+    def ecef(self) -> tuple[float, float, float]:
+        """The origin in Earth-centred Earth-fixed coordinates (m)."""
+        return _geodetic_to_ecef(self.latitude, self.longitude, self.elevation)
+
+    def geodetic_to_enu(self, latitude: float, longitude: float,
+                        height: float | None = None) -> tuple[float, float, float]:
+        """(east, north, up) in metres of a WGS84 point; ``height`` defaults to the origin's."""
+        h = self.elevation if height is None else height
+        x, y, z = _geodetic_to_ecef(latitude, longitude, h)
+        x0, y0, z0 = self.ecef()
+        d = (x - x0, y - y0, z - z0)
+        e, n, u = self._basis()
+        return (sum(a * b for a, b in zip(e, d, strict=True)),
+                sum(a * b for a, b in zip(n, d, strict=True)),
+                sum(a * b for a, b in zip(u, d, strict=True)))
+
+    def enu_to_geodetic(self, east: float, north: float,
+                        up: float = 0.0) -> tuple[float, float, float]:
+        """(latitude, longitude, ellipsoid height) of a point given in the local ENU frame."""
+        e, n, u = self._basis()
+        x0, y0, z0 = self.ecef()
+        x = x0 + east * e[0] + north * n[0] + up * u[0]
+        y = y0 + east * e[1] + north * n[1] + up * u[1]
+        z = z0 + east * e[2] + north * n[2] + up * u[2]
+        return _ecef_to_geodetic(x, y, z)
+
+    def to_local(self, latitude: float, longitude: float) -> tuple[float, float]:
+        """(east, north) of a ground point given by latitude/longitude (degrees)."""
+        e, n, _ = self.geodetic_to_enu(latitude, longitude)
+        return e, n
+
+    def to_geodetic(self, east: float, north: float) -> tuple[float, float]:
+        """(latitude, longitude) of the point at the origin's height whose tangent-plane
+        (east, north) is given: the exact inverse of :meth:`to_local`."""
+        up = 0.0
+        for _ in range(4):  # the tangent plane leaves the ellipsoid by d^2 / 2R
+            lat, lon, h = self.enu_to_geodetic(east, north, up)
+            up -= h - self.elevation
+        return lat, lon
+
+
+# --------------------------------------------------------------------------- model
+@dataclass(frozen=True)
+class TerrainSpec:
+    """The heightfield: extent (m), grid resolution (m), roughness (m RMS), seed, slope."""
+
+    width: float
+    depth: float
+    resolution: float = 0.1
+    roughness: float = 0.0
+    seed: int = 0
+    slope_east: float = 0.0
+    slope_north: float = 0.0
+
+    @property
+    def east_range(self) -> tuple[float, float]:
+        return -self.width / 2.0, self.width / 2.0
+
+    @property
+    def north_range(self) -> tuple[float, float]:
+        return -self.depth / 2.0, self.depth / 2.0
+
+    def contains(self, east: float, north: float) -> bool:
+        """Whether (east, north) lies on the terrain, edges included."""
+        return abs(east) <= self.width / 2.0 and abs(north) <= self.depth / 2.0
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One obstacle. ``length`` runs along ``heading``, ``width`` across it.
+
+    box: ``length``, ``width``, ``height``, ``heading``; cylinder: ``radius``, ``height``;
+    ditch: ``length``, ``width``, ``depth``, ``heading``. Unused fields are 0.
+    """
+
+    type: ObstacleType
+    east: float
+    north: float
+    length: float = 0.0
+    width: float = 0.0
+    height: float = 0.0
+    depth: float = 0.0
+    radius: float = 0.0
+    heading: float = 0.0
+    line: int = 0
+
+    @property
+    def positive(self) -> bool:
+        return self.type != "ditch"
+
+    def contains(self, east: float, north: float) -> bool:
+        """Whether the ground point (east, north) lies inside the obstacle's footprint."""
+        de, dn = east - self.east, north - self.north
+        if self.type == "cylinder":
+            return de * de + dn * dn <= self.radius * self.radius
+        h = math.radians(self.heading)
+        along = de * math.sin(h) + dn * math.cos(h)
+        across = de * math.cos(h) - dn * math.sin(h)
+        return abs(along) <= self.length / 2.0 and abs(across) <= self.width / 2.0
+
+    def bounding_radius(self) -> float:
+        if self.type == "cylinder":
+            return self.radius
+        return math.hypot(self.length, self.width) / 2.0
+
+
+@dataclass(frozen=True)
+class VehicleStart:
+    """The start pose of the vehicle reference (rear axle centre): metres and degrees."""
+
+    east: float = 0.0
+    north: float = 0.0
+    heading: float = 0.0
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """A mission waypoint, held in both local (m) and geodetic (deg) coordinates."""
+
+    east: float
+    north: float
+    latitude: float
+    longitude: float
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class Mission:
+    """Waypoints to visit in order; ``patrol`` repeats them (Pure Pursuit's patrol mode)."""
+
+    waypoints: tuple[Waypoint, ...] = ()
+    patrol: bool = False
+
+
+@dataclass(frozen=True)
+class DriveCommand:
+    """From ``time`` (s) on, command ``speed`` (m/s) and ``steering`` (deg, + = left)."""
+
+    time: float
+    speed: float
+    steering: float
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class World:
+    """A loaded world file."""
+
+    name: str
+    origin: Origin
+    terrain: TerrainSpec
+    obstacles: tuple[Obstacle, ...] = ()
+    vehicle: VehicleStart = field(default_factory=VehicleStart)
+    mission: Mission = field(default_factory=Mission)
+    drive: tuple[DriveCommand, ...] = ()
+    description: str = ""
+    path: Path | None = None
+
+    def command_at(self, time: float) -> tuple[float, float]:
+        """(speed m/s, steering deg) the drive script commands at ``time``; (0, 0) before
+        the first command and when there is no script."""
+        speed, steering = 0.0, 0.0
+        for command in self.drive:
+            if command.time > time:
+                break
+            speed, steering = command.speed, command.steering
+        return speed, steering
+
+    @property
+    def drive_duration(self) -> float:
+        """Time of the last drive command (s); 0 without a script."""
+        return self.drive[-1].time if self.drive else 0.0
+
+
+# --------------------------------------------------------------------------- parsing
+def _xml_parser() -> etree.XMLParser:
+    # Same hardening as afa.config.miro: nothing is fetched, nothing is expanded.
+    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
+                           dtd_validation=False, huge_tree=False, remove_comments=True,
+                           remove_pis=True)
+
+
+_OBSTACLE_FIELDS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    # type: (required attributes, optional attributes) besides "type"
+    "box": (("east", "north", "length", "width", "height"), ("heading",)),
+    "cylinder": (("east", "north", "radius", "height"), ()),
+    "ditch": (("east", "north", "length", "width", "depth"), ("heading",)),
+}
+
+
+class _Reader:
+    """Collects problems while reading, so one error lists all of them."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.problems: list[str] = []
+
+    def problem(self, element: etree._Element | None, message: str) -> None:
+        line = element.sourceline if element is not None and element.sourceline else 1
+        self.problems.append(f"{self.path}:{line}: {message}")
+
+    def check_attributes(self, element: etree._Element, required: tuple[str, ...],
+                         optional: tuple[str, ...] = ()) -> bool:
+        ok = True
+        for name in element.attrib:
+            if name not in required and name not in optional:
+                allowed = ", ".join(required + optional) or "none"
+                self.problem(element, f"<{element.tag}>: unknown attribute {name!r} "
+                                      f"(allowed: {allowed})")
+                ok = False
+        for name in required:
+            if name not in element.attrib:
+                self.problem(element, f"<{element.tag}>: missing attribute {name!r}")
+                ok = False
+        return ok
+
+    def number(self, element: etree._Element, name: str, default: float | None = None, *,
+               minimum: float | None = None, positive: bool = False,
+               maximum: float | None = None) -> float:
+        raw = element.get(name)
+        if raw is None:
+            if default is None:
+                return math.nan  # already reported by check_attributes
+            return default
+        try:
+            value = float(raw.strip())
+        except ValueError:
+            self.problem(element, f"<{element.tag}> {name}={raw!r}: not a number")
+            return math.nan
+        if not math.isfinite(value):
+            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be finite")
+            return math.nan
+        if positive and value <= 0:
+            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be > 0")
+        elif minimum is not None and value < minimum:
+            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be >= {minimum:g}")
+        elif maximum is not None and value > maximum:
+            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be <= {maximum:g}")
+        return value
+
+    def integer(self, element: etree._Element, name: str, default: int) -> int:
+        raw = element.get(name)
+        if raw is None:
+            return default
+        try:
+            value = int(raw.strip())
+        except ValueError:
+            self.problem(element, f"<{element.tag}> {name}={raw!r}: not an integer")
+            return default
+        if value < 0:
+            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be >= 0")
+            return default
+        return value
+
+    def boolean(self, element: etree._Element, name: str, default: bool) -> bool:
+        raw = element.get(name)
+        if raw is None:
+            return default
+        text = raw.strip().lower()
+        if text in ("true", "1", "yes"):
+            return True
+        if text in ("false", "0", "no"):
+            return False
+        self.problem(element, f"<{element.tag}> {name}={raw!r}: expected true or false")
+        return default
+
+    def no_children(self, element: etree._Element) -> None:
+        for child in element:
+            self.problem(child, f"<{element.tag}> takes no child elements, got <{child.tag}>")
+        if element.text and element.text.strip():
+            self.problem(element, f"<{element.tag}> takes no text")
+
+
+def load_world(path: str | Path) -> World:
+    """Read and validate a world file.
+
+    Raises :class:`~afa.errors.ConfigError` with one ``file:line: message`` line per
+    problem: unreadable, oversized or malformed file, DTD or entity, unknown element or
+    attribute, bad number, unknown obstacle type, an object outside the terrain.
+    """
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_WORLD_BYTES:
+            raise ConfigError(f"{path}:1: file is {size} bytes; the limit is {MAX_WORLD_BYTES}")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"{path}:0: cannot read world file: {exc.strerror or exc}") from exc
+    return parse_world(data, path)
+
+
+def parse_world(data: bytes, path: str | Path = "<world>") -> World:
+    """Parse world-file bytes (``path`` is used in messages). Raises ConfigError."""
+    path = Path(path)
+    if len(data) > MAX_WORLD_BYTES:
+        raise ConfigError(f"{path}:1: world is {len(data)} bytes; the limit is {MAX_WORLD_BYTES}")
+    try:
+        root = etree.fromstring(data, parser=_xml_parser())
+    except etree.XMLSyntaxError as exc:
+        raise ConfigError(f"{path}:{exc.lineno or 1}: XML syntax error: {exc.msg}") from None
+    if root.getroottree().docinfo.internalDTD is not None:
+        raise ConfigError(f"{path}:1: a DTD internal subset is not allowed (entities and "
+                          "entity expansion are refused)")
+    for node in root.iter():
+        if isinstance(node, etree._Entity):
+            raise ConfigError(f"{path}:{node.sourceline}: entity references are not allowed")
+    reader = _Reader(path)
+    world = _read_world(reader, root)
+    if reader.problems or world is None:
+        raise ConfigError(reader.problems or [f"{path}:1: invalid world"])
+    return world
+
+
+def _read_world(r: _Reader, root: etree._Element) -> World | None:
+    if root.tag != "world":
+        r.problem(root, f"the root element must be <world>, not <{root.tag}>")
+        return None
+    r.check_attributes(root, ("name",))
+    name = root.get("name", "")
+    singles: dict[str, etree._Element] = {}
+    obstacles: list[etree._Element] = []
+    description = ""
+    for child in root:
+        if child.tag == "obstacle":
+            obstacles.append(child)
+        elif child.tag in ("origin", "terrain", "vehicle", "mission", "drive", "description"):
+            if child.tag in singles:
+                r.problem(child, f"<{child.tag}> appears twice (first at line "
+                                 f"{singles[child.tag].sourceline})")
+                continue
+            singles[child.tag] = child
+            if child.tag == "description":
+                description = " ".join((child.text or "").split())
+        else:
+            r.problem(child, f"unknown element <{child.tag}> in <world> (expected origin, "
+                             "terrain, obstacle, vehicle, mission, drive, description)")
+    for required in ("origin", "terrain"):
+        if required not in singles:
+            r.problem(root, f"<world> needs an <{required}> element")
+    if "origin" not in singles or "terrain" not in singles:
+        return None
+
+    origin = _read_origin(r, singles["origin"])
+    terrain = _read_terrain(r, singles["terrain"])
+    items = tuple(o for o in (_read_obstacle(r, e, terrain) for e in obstacles) if o is not None)
+    vehicle = _read_vehicle(r, singles.get("vehicle"), terrain)
+    mission = _read_mission(r, singles.get("mission"), origin, terrain)
+    drive = _read_drive(r, singles.get("drive"))
+    return World(name=name, origin=origin, terrain=terrain, obstacles=items, vehicle=vehicle,
+                 mission=mission, drive=drive, description=description, path=r.path)
+
+
+def _sized(terrain: TerrainSpec) -> bool:
+    # a terrain whose size did not parse has been reported; do not pile up more errors
+    return math.isfinite(terrain.width + terrain.depth)
+
+
+def _read_origin(r: _Reader, e: etree._Element) -> Origin:
+    r.check_attributes(e, ("latitude", "longitude"), ("elevation",))
+    r.no_children(e)
+    return Origin(latitude=r.number(e, "latitude", minimum=-89.0, maximum=89.0),
+                  longitude=r.number(e, "longitude", minimum=-180.0, maximum=180.0),
+                  elevation=r.number(e, "elevation", 0.0))
+
+
+def _read_terrain(r: _Reader, e: etree._Element) -> TerrainSpec:
+    r.check_attributes(e, ("width", "depth"), ("resolution", "roughness", "seed"))
+    width = r.number(e, "width", positive=True, maximum=5000.0)
+    depth = r.number(e, "depth", positive=True, maximum=5000.0)
+    resolution = r.number(e, "resolution", 0.1, positive=True, maximum=10.0)
+    if math.isfinite(width * depth * resolution) and resolution > 0:
+        cells = (width / resolution + 1) * (depth / resolution + 1)
+        if cells > 64e6:
+            r.problem(e, f"<terrain> {width:g} x {depth:g} m at {resolution:g} m is "
+                         f"{cells:.3g} cells; the limit is 6.4e7 (use a coarser resolution)")
+    roughness = r.number(e, "roughness", 0.0, minimum=0.0, maximum=5.0)
+    seed = r.integer(e, "seed", 0)
+    slope_east = slope_north = 0.0
+    seen = False
+    for child in e:
+        if child.tag != "slope":
+            r.problem(child, f"unknown element <{child.tag}> in <terrain> (expected slope)")
+            continue
+        if seen:
+            r.problem(child, "<slope> appears twice")
+        seen = True
+        r.check_attributes(child, (), ("east", "north"))
+        r.no_children(child)
+        slope_east = r.number(child, "east", 0.0, minimum=-1.0, maximum=1.0)
+        slope_north = r.number(child, "north", 0.0, minimum=-1.0, maximum=1.0)
+    return TerrainSpec(width=width, depth=depth, resolution=resolution, roughness=roughness,
+                       seed=seed, slope_east=slope_east, slope_north=slope_north)
+
+
+def _read_obstacle(r: _Reader, e: etree._Element, terrain: TerrainSpec) -> Obstacle | None:
+    kind = e.get("type")
+    if kind is None:
+        r.problem(e, "<obstacle>: missing attribute 'type' (box, cylinder or ditch)")
+        return None
+    if kind not in _OBSTACLE_FIELDS:
+        r.problem(e, f"<obstacle>: unknown type {kind!r} (expected box, cylinder or ditch)")
+        return None
+    required, optional = _OBSTACLE_FIELDS[kind]
+    ok = r.check_attributes(e, ("type",) + required, optional)
+    r.no_children(e)
+    before = len(r.problems)
+    values = {"east": r.number(e, "east"), "north": r.number(e, "north")}
+    for name in required[2:] + optional:
+        values[name] = r.number(e, name, 0.0 if name == "heading" else None,
+                                positive=name != "heading")
+    if not ok or len(r.problems) > before or any(math.isnan(v) for v in values.values()):
+        return None
+    obstacle = Obstacle(type=kind, line=e.sourceline or 0, **values)  # type: ignore[arg-type]
+    if _sized(terrain) and not terrain.contains(obstacle.east, obstacle.north):
+        r.problem(e, f"<obstacle> at east={obstacle.east:g} north={obstacle.north:g} is "
+                     f"outside the terrain (±{terrain.width / 2:g}, ±{terrain.depth / 2:g} m)")
+    return obstacle
+
+
+def _read_vehicle(r: _Reader, e: etree._Element | None, terrain: TerrainSpec) -> VehicleStart:
+    if e is None:
+        return VehicleStart()
+    r.check_attributes(e, ("east", "north"), ("heading",))
+    r.no_children(e)
+    start = VehicleStart(east=r.number(e, "east"), north=r.number(e, "north"),
+                         heading=r.number(e, "heading", 0.0))
+    if (_sized(terrain) and math.isfinite(start.east + start.north)
+            and not terrain.contains(start.east, start.north)):
+        r.problem(e, "<vehicle> start is outside the terrain")
+    return start
+
+
+def _read_mission(r: _Reader, e: etree._Element | None, origin: Origin,
+                  terrain: TerrainSpec) -> Mission:
+    if e is None:
+        return Mission()
+    r.check_attributes(e, (), ("patrol",))
+    patrol = r.boolean(e, "patrol", False)
+    waypoints: list[Waypoint] = []
+    for child in e:
+        if child.tag != "waypoint":
+            r.problem(child, f"unknown element <{child.tag}> in <mission> (expected waypoint)")
+            continue
+        r.no_children(child)
+        keys = set(child.attrib)
+        if keys == {"latitude", "longitude"}:
+            lat = r.number(child, "latitude", minimum=-89.0, maximum=89.0)
+            lon = r.number(child, "longitude", minimum=-180.0, maximum=180.0)
+            if math.isnan(lat + lon + origin.latitude + origin.longitude):
+                continue
+            east, north = origin.to_local(lat, lon)
+        elif keys == {"east", "north"}:
+            east, north = r.number(child, "east"), r.number(child, "north")
+            if math.isnan(east + north + origin.latitude + origin.longitude):
+                continue
+            lat, lon = origin.to_geodetic(east, north)
+        else:
+            r.problem(child, "<waypoint> takes either latitude and longitude or east and "
+                             f"north, got {', '.join(sorted(keys)) or 'no attributes'}")
+            continue
+        if _sized(terrain) and not terrain.contains(east, north):
+            r.problem(child, f"<waypoint> at east={east:.1f} north={north:.1f} is outside "
+                             "the terrain")
+        waypoints.append(Waypoint(east, north, lat, lon, child.sourceline or 0))
+    return Mission(waypoints=tuple(waypoints), patrol=patrol)
+
+
+def _read_drive(r: _Reader, e: etree._Element | None) -> tuple[DriveCommand, ...]:
+    if e is None:
+        return ()
+    r.check_attributes(e, ())
+    commands: list[DriveCommand] = []
+    for child in e:
+        if child.tag != "command":
+            r.problem(child, f"unknown element <{child.tag}> in <drive> (expected command)")
+            continue
+        if not r.check_attributes(child, ("time", "speed", "steering")):
+            continue
+        r.no_children(child)
+        before = len(r.problems)
+        command = DriveCommand(time=r.number(child, "time", minimum=0.0),
+                               speed=r.number(child, "speed", minimum=-10.0, maximum=10.0),
+                               steering=r.number(child, "steering", minimum=-90.0, maximum=90.0),
+                               line=child.sourceline or 0)
+        if len(r.problems) > before:
+            continue
+        if commands and command.time <= commands[-1].time:
+            r.problem(child, f"<command> time={command.time:g} must be later than the "
+                             f"previous command's ({commands[-1].time:g})")
+            continue
+        commands.append(command)
+    return tuple(commands)
