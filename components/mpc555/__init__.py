@@ -1,12 +1,13 @@
-"""The MPC555 vehicle controller link (seed §3.1.5, §3.5): Wheel Odometry and Vehicle Control."""
+"""The MPC555 vehicle controller link (seed §3.1.5, §3.5): Wheel Odometry and Vehicle Control.
 
-from afa.registry import not_implemented
+Both components talk to the one controller over one serial port
+(``docs/protocols/mpc555.md``); :class:`~components.mpc555.fake.FakeMpc555` plays the
+controller in tests and in the simulator.
+"""
+
+from components.mpc555.control import VehicleControl
+from components.mpc555.odometry import WheelOdometry
 from components.mpc555.parameters import VehicleControlParameters, WheelOdometryParameters
-
-WheelOdometry = not_implemented("WheelOdometry", WheelOdometryParameters,
-                                "Wheel Odometry driver: device drivers")
-VehicleControl = not_implemented("VehicleControl", VehicleControlParameters,
-                                 "Vehicle Control driver: device drivers")
 
 __all__ = ["WheelOdometry", "VehicleControl", "WheelOdometryParameters",
            "VehicleControlParameters"]
