@@ -158,7 +158,9 @@ def _decode(args: argparse.Namespace) -> int:
     for offset in range(0, len(data), 4096):
         for message in decoder.feed(data[offset:offset + 4096]):
             messages += 1
-            record = {"type": type(message).__name__, **_jsonable(dataclasses.asdict(message))}
+            inner = getattr(message, "message", None)  # framed links wrap the message
+            kind = type(inner if dataclasses.is_dataclass(inner) else message).__name__
+            record = {"type": kind, **_jsonable(dataclasses.asdict(message))}
             print(json.dumps(record))
     stats = decoder.stats
     print(json.dumps({"statistics": {"messages": messages, "checksum_failures":
@@ -169,6 +171,7 @@ def _decode(args: argparse.Namespace) -> int:
 
 
 def _jsonable(value: Any) -> Any:
+    import datetime
     import enum
 
     import numpy as np
@@ -185,31 +188,46 @@ def _jsonable(value: Any) -> Any:
         return value.value if isinstance(value.value, (str, int, float)) else value.name
     if isinstance(value, bytes):
         return value.hex()
+    if isinstance(value, (datetime.date, datetime.time)):
+        return value.isoformat()
     return value
 
 
 # -- run --------------------------------------------------------------------------------
 def _run(args: argparse.Namespace) -> int:
-    if args.sim or args.world is not None:
-        print("afa run: --sim is not available yet: the simulated world (issue 5) has not "
-              "landed. Run without --sim to use the real devices named in the configuration.",
+    if (args.fast or args.world is not None) and not args.sim:
+        print("afa run: --fast and --world need --sim (real devices run in real time).",
               file=sys.stderr)
-        return EXIT_FAILURE
-    if args.fast:
-        print("afa run: --fast (virtual time) only makes sense with --sim or a replay; real "
-              "devices run in real time.", file=sys.stderr)
-        return EXIT_FAILURE
+        return EXIT_INVALID
     return asyncio.run(_run_system(args))
 
 
+def _simulator() -> Any:
+    """The simulation registered under the entry-point group ``afa.simulators``."""
+    from importlib.metadata import entry_points
+
+    found = {ep.name: ep for ep in entry_points(group="afa.simulators")}
+    if not found:
+        raise AfaError("no simulator is installed (entry-point group afa.simulators); "
+                       "is afa installed? pip install -e .")
+    return found[sorted(found)[0]].load()
+
+
 async def _run_system(args: argparse.Namespace) -> int:
+    from contextlib import AsyncExitStack
+
+    from afa.clock import VirtualClock, WallClock
     from afa.errors import StartupError
     from afa.system import System
 
-    try:
-        system = System.from_xml(args.config, strict=args.strict)
-    except ConfigError:
-        raise
+    clock = VirtualClock() if args.fast else WallClock()
+    system = System.from_xml(args.config, strict=args.strict, clock=clock)
+    simulation = None
+    if args.sim:
+        simulation_cls = _simulator()
+        world = args.world or simulation_cls.default_world()
+        simulation = simulation_cls(world, clock, seed=args.seed)
+        simulation.attach(system)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -218,17 +236,24 @@ async def _run_system(args: argparse.Namespace) -> int:
         except (NotImplementedError, RuntimeError):  # pragma: no cover - non-Unix
             pass
     wall_start = time.monotonic()
-    clock_start = system.clock.now()
+    clock_start = clock.now()
     try:
-        async with system:
+        async with AsyncExitStack() as stack:
+            if simulation is not None:
+                await stack.enter_async_context(simulation)
+            await stack.enter_async_context(system)
             for note in system.notes:
                 print(f"afa: {note}", file=sys.stderr)
-            waiter = asyncio.ensure_future(stop.wait())
-            runner = asyncio.ensure_future(system.run(args.duration))
-            await asyncio.wait({waiter, runner}, return_when=asyncio.FIRST_COMPLETED)
-            for task in (waiter, runner):
+            tasks = [asyncio.ensure_future(stop.wait()),
+                     asyncio.ensure_future(system.run(args.duration)),
+                     asyncio.ensure_future(_progress(system, simulation, clock, clock_start,
+                                                     wall_start))]
+            await asyncio.wait(tasks[:2], return_when=asyncio.FIRST_COMPLETED)
+            for task in tasks:
                 task.cancel()
             summary = _summary(system, clock_start, wall_start)
+            if simulation is not None:
+                summary.update(simulation.summary())
     except StartupError as exc:
         print(f"afa run: the system did not start. {exc}".replace("\n", " "), file=sys.stderr)
         return EXIT_FAILURE
@@ -236,6 +261,16 @@ async def _run_system(args: argparse.Namespace) -> int:
     if args.summary is not None:
         args.summary.write_text(json.dumps(summary, indent=2))
     return EXIT_OK
+
+
+async def _progress(system: Any, simulation: Any, clock: Any, clock_start: float,
+                    wall_start: float) -> None:
+    """One progress line every 10 s of clock time (stderr)."""
+    async for _ in clock.periodic(10.0, first=clock_start + 10.0):
+        elapsed = clock.now() - clock_start
+        wall = max(1e-9, time.monotonic() - wall_start)
+        where = simulation.progress() if simulation is not None else ""
+        print(f"t={elapsed:7.1f} s  x{elapsed / wall:6.1f} real time  {where}", file=sys.stderr)
 
 
 def _summary(system: Any, clock_start: float, wall_start: float) -> dict[str, Any]:
@@ -259,6 +294,12 @@ def _summary(system: Any, clock_start: float, wall_start: float) -> dict[str, An
 
 def _print_summary(summary: dict[str, Any]) -> None:
     events = sum(summary["events"].values())
+    if "world" in summary:
+        pose = summary.get("pose_error") or {}
+        print(f"world {summary['world']}: {summary['distance_m']:.1f} m driven, "
+              f"{len(summary['collisions'])} collision(s), waypoints "
+              f"{summary['waypoints_reached']}/{summary['waypoints_total']}, pose RMS "
+              f"{pose.get('rms_position_m', 'n/a')} m / {pose.get('rms_heading_deg', 'n/a')} deg")
     print(f"ran {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s wall; "
           f"{events} events, {summary['events_dropped']} dropped; "
           f"{len(summary['component_errors'])} component(s) with errors")
