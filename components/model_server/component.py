@@ -67,7 +67,8 @@ class ModelServer(SubscribePublishServer):
         self._imu_rotation = self.model.transformation(VEHICLE_FRAME, IMU_FRAME)[:3, :3]
         offset = (float(antenna[0]), float(antenna[1]), float(antenna[2]))
         if p.UseRawPose:
-            self.filter: PoseFilter | RawPose = RawPose(antenna_offset=offset)
+            # GPS position with the IMU's attitude: the GPS track is erratic at low speed
+            self.filter: PoseFilter | RawPose = RawPose("imu", antenna_offset=offset)
         else:
             self.filter = PoseFilter(PoseFilterTuning(
                 fidget_delay=p.FidgetDelay, fidget_period=p.FidgetPeriod,

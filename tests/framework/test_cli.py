@@ -46,6 +46,6 @@ def test_run_with_a_bad_config_exits_2_without_traceback(tmp_path, capsys):
     assert err.startswith(f"{bad}:") and "Traceback" not in err
 
 
-def test_run_sim_is_refused_until_the_simulator_exists(capsys):
-    assert main(["run", str(RAPTOR), "--sim"]) == 1
-    assert "not available yet" in capsys.readouterr().err
+def test_fast_without_sim_is_refused(capsys):
+    assert main(["run", str(RAPTOR), "--fast"]) == 2
+    assert "need --sim" in capsys.readouterr().err
