@@ -38,8 +38,8 @@ from afa.sim.terrain import Terrain
 from afa.sim.vehicle import Vehicle, VehicleState
 from afa.sim.world import World, load_world
 from components.gps_sokkia import GpsSokkia
-from components.gps_sokkia.codec import latlon_to_utm
-from components.gps_sokkia.fake import FakeGps, GpsTruth
+from components.gps_sokkia.codec import PositionType, latlon_to_utm
+from components.gps_sokkia.fake import FakeGps, GpsNoise, GpsTruth
 from components.imu import Imu
 from components.imu.fake import FakeImu, ImuTruth
 from components.model_server.geometry import GeometryModel
@@ -67,6 +67,10 @@ PHYSICS_STEP = 0.02
 #: How often the drive script repeats its joystick command (s): Vehicle Control's
 #: watchdog stops the vehicle when commands stop arriving, as a real joystick link would.
 JOYSTICK_PERIOD = 0.1
+#: The Raptor's GSR2600 took RTCA corrections from a Pacific Crest radio: NovAtel's RT-20
+#: carrier-phase differential mode, 0.20 m CEP (OEM4 specification), i.e. about 0.17 m
+#: per axis; errors correlated over ~10 s as the receiver's noise model says.
+GPS_NOISE = GpsNoise(horizontal=0.17, vertical=0.34)
 #: The stereo emulator ray-casts one depth sample per STEREO_SUBSAMPLE^2 pixels.
 STEREO_SUBSAMPLE = 4
 
@@ -118,7 +122,7 @@ class RaptorSimulation:
 
     def _emulator(self, component: Component) -> Callable[[Any], Awaitable[Any]] | None:
         if isinstance(component, GpsSokkia):
-            fake: Any = FakeGps(self.clock, self._gps_truth, self._rng())
+            fake: Any = FakeGps(self.clock, self._gps_truth, self._rng(), noise=GPS_NOISE)
         elif isinstance(component, Imu):
             fake = FakeImu(self.clock, self._imu_truth, rng=self._rng())
         elif isinstance(component, (WheelOdometry, VehicleControl)):
@@ -160,7 +164,8 @@ class RaptorSimulation:
         track = math.degrees(math.atan2(velocity[0], velocity[1])) % 360.0 if speed > 1e-6 \
             else state.heading_deg
         return GpsTruth(lat=lat, lon=lon, height=self.world.origin.elevation + position[2],
-                        speed=speed, track=track, vertical_speed=float(velocity[2]))
+                        speed=speed, track=track, vertical_speed=float(velocity[2]),
+                        position_type=PositionType.L1_FLOAT)
 
     def _imu_truth(self, t: float) -> ImuTruth:
         state = self.state
