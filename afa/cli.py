@@ -57,6 +57,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--fast", action="store_true",
                      help="virtual time, as fast as possible (needs --sim)")
     run.add_argument("--summary", type=Path, help="write a JSON run summary here")
+    run.add_argument("--expose", action="store_true",
+                     help="with --sim: serve serial emulators on pseudo-terminals and the "
+                          "lasers on loopback TCP (real transports; not with --fast)")
     run.add_argument("--strict", action="store_true",
                      help="fail if a configured component is not implemented yet")
     run.set_defaults(handler=_run)
@@ -195,9 +198,13 @@ def _jsonable(value: Any) -> Any:
 
 # -- run --------------------------------------------------------------------------------
 def _run(args: argparse.Namespace) -> int:
-    if (args.fast or args.world is not None) and not args.sim:
-        print("afa run: --fast and --world need --sim (real devices run in real time).",
-              file=sys.stderr)
+    if (args.fast or args.world is not None or args.expose) and not args.sim:
+        print("afa run: --fast, --world and --expose need --sim (real devices run in real "
+              "time).", file=sys.stderr)
+        return EXIT_INVALID
+    if args.expose and args.fast:
+        print("afa run: --expose uses real pseudo-terminals and sockets, whose timing virtual "
+              "time cannot control; run it without --fast.", file=sys.stderr)
         return EXIT_INVALID
     return asyncio.run(_run_system(args))
 
@@ -226,7 +233,7 @@ async def _run_system(args: argparse.Namespace) -> int:
     if args.sim:
         simulation_cls = _simulator()
         world = args.world or simulation_cls.default_world()
-        simulation = simulation_cls(world, clock, seed=args.seed)
+        simulation = simulation_cls(world, clock, seed=args.seed, expose=args.expose)
         simulation.attach(system)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()

@@ -17,6 +17,7 @@ per component name instead of the real device.
 from __future__ import annotations
 
 import asyncio
+import os
 from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine
@@ -26,7 +27,8 @@ from typing import Any
 from afa.errors import EDevIO, TransportClosed
 
 __all__ = [
-    "ByteStream", "MemoryByteStream", "memory_pipe", "AsyncioByteStream", "open_serial",
+    "ByteStream", "MemoryByteStream", "memory_pipe", "AsyncioByteStream", "PtyDeviceStream",
+    "open_serial",
     "open_tcp", "DeviceSpec", "SerialSpec", "TcpSpec", "DeviceOpener", "DeviceFactory",
 ]
 
@@ -214,6 +216,74 @@ DeviceSpec = SerialSpec | TcpSpec
 DeviceFactory = Callable[[DeviceSpec], Awaitable[ByteStream]]
 
 
+class PtyDeviceStream(ByteStream):
+    """The device end of a pseudo-terminal, as a :class:`ByteStream`.
+
+    Fake devices and simulator emulators serve it while the driver opens the terminal's
+    path (:attr:`path`) as a real serial port through pyserial-asyncio.
+    """
+
+    def __init__(self) -> None:
+        import tty
+
+        self._fd, self._worker = os.openpty()
+        tty.setraw(self._fd)
+        os.set_blocking(self._fd, False)
+        self.path = os.ttyname(self._worker)
+        self._closed = False
+
+    async def read(self, max_bytes: int = 4096) -> bytes:
+        while True:
+            if self._closed:
+                raise TransportClosed(f"{self.path}: closed")
+            try:
+                data = os.read(self._fd, max_bytes)
+            except BlockingIOError:
+                await self._ready(reading=True)
+                continue
+            except OSError as exc:
+                raise TransportClosed(f"{self.path}: {exc}") from exc
+            if not data:
+                raise TransportClosed(f"{self.path}: end of stream")
+            return data
+
+    async def write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            if self._closed:
+                raise TransportClosed(f"{self.path}: closed")
+            try:
+                view = view[os.write(self._fd, view):]
+            except BlockingIOError:  # the driver has not read yet
+                await self._ready(reading=False)
+            except OSError as exc:
+                raise TransportClosed(f"{self.path}: {exc}") from exc
+
+    async def _ready(self, *, reading: bool) -> None:
+        loop = asyncio.get_running_loop()
+        ready: asyncio.Future[None] = loop.create_future()
+
+        def wake() -> None:
+            if not ready.done():
+                ready.set_result(None)
+
+        (loop.add_reader if reading else loop.add_writer)(self._fd, wake)
+        try:
+            await ready
+        finally:
+            (loop.remove_reader if reading else loop.remove_writer)(self._fd)
+
+    async def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            os.close(self._fd)
+            os.close(self._worker)
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+
 class _SharedPort:
     """One real connection shared by several components (the Raptor's Wheel Odometry
     and Vehicle Control both talk to the MPC555 on one serial port).
@@ -302,9 +372,13 @@ class DeviceOpener:
         if not isinstance(spec, (SerialSpec, TcpSpec)):
             raise EDevIO(f"{component}: no device available for {spec!r}")
         if isinstance(spec, SerialSpec):
-            port = self._shared.get(spec.device)
-            if port is None:
-                port = self._shared[spec.device] = _SharedPort(
-                    lambda: open_serial(spec.device, spec.baudrate), spec.device)
-            return await port.open()
+            return await self.open_serial(spec)
         return await open_tcp(spec.host, spec.port)
+
+    async def open_serial(self, spec: SerialSpec) -> ByteStream:
+        """Open a real serial port, shared with any other component naming it."""
+        port = self._shared.get(spec.device)
+        if port is None:
+            port = self._shared[spec.device] = _SharedPort(
+                lambda: open_serial(spec.device, spec.baudrate), spec.device)
+        return await port.open()

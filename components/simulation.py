@@ -31,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from afa import Clock, EDevIO, Event, System
+from afa import ByteStream, Clock, EDevIO, Event, SerialSpec, System, TcpSpec
+from afa.transport import AsyncioByteStream, PtyDeviceStream, open_tcp
 from afa.component import Component
 from afa.sim.raycast import cast_rays, depth_image
 from afa.sim.terrain import Terrain
@@ -87,7 +88,10 @@ class RaptorSimulation:
         return DEFAULT_WORLD
 
     def __init__(self, world: World | str | Path, clock: Clock, *, seed: int = 0,
-                 geometry: GeometryModel | None = None) -> None:
+                 geometry: GeometryModel | None = None, expose: bool = False) -> None:
+        """``expose``: serve the serial emulators on pseudo-terminals (the drivers open
+        them through pyserial-asyncio) and the lasers on loopback TCP ports, instead of
+        in-memory pipes. Real I/O is not deterministic: use it with the wall clock."""
         self.world = world if isinstance(world, World) else load_world(world)
         self.clock = clock
         self.seed = seed
@@ -106,6 +110,9 @@ class RaptorSimulation:
         self._tasks: list[asyncio.Task[None]] = []
         self._system: System | None = None
         self._mpc555: FakeMpc555 | None = None
+        self.expose = expose
+        self._exposed: dict[str, tuple[Any, str]] = {}  # component -> (fake, "serial"|"tcp")
+        self._endpoints: list[Any] = []
 
     # -- wiring --------------------------------------------------------------------------
     def attach(self, system: System) -> None:
@@ -115,6 +122,11 @@ class RaptorSimulation:
             factory = self._emulator(component)
             if factory is not None:
                 system.devices.overrides[component.name] = factory
+            if self.expose and self.fakes and factory is not None and not isinstance(component, Stereo):
+                kind = "tcp" if isinstance(component, NodLaser) else "serial"
+                fake = self._mpc555 if isinstance(component, (WheelOdometry, VehicleControl)) \
+                    else self.fakes[-1]
+                self._exposed[component.name] = (fake, kind)
         system.channel.add_tap(self._observe)
 
     def _rng(self) -> np.random.Generator:
@@ -222,10 +234,47 @@ class RaptorSimulation:
         return render
 
     # -- running ---------------------------------------------------------------------------
+    async def _expose_devices(self) -> None:
+        """Serve each exposed emulator on a pseudo-terminal or a loopback TCP port and
+        point its component at it (through the real serial and TCP transports)."""
+        assert self._system is not None
+        devices = self._system.devices
+        loop = asyncio.get_running_loop()
+        ptys: dict[int, PtyDeviceStream] = {}
+        for name, (fake, kind) in self._exposed.items():
+            if kind == "serial":
+                pty = ptys.get(id(fake))
+                if pty is None:  # one terminal per emulated device (MPC555: two components)
+                    pty = ptys[id(fake)] = PtyDeviceStream()
+                    self._endpoints.append(pty)
+                    self._tasks.append(loop.create_task(fake.serve(pty)))
+
+                async def open_pty(spec: SerialSpec, path: str = pty.path) -> ByteStream:
+                    return await devices.open_serial(SerialSpec(path, spec.baudrate))
+
+                devices.overrides[name] = open_pty
+                log.info("%s: emulated on %s", name, pty.path)
+            else:
+                async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
+                                 fake: Any = fake) -> None:
+                    await fake.serve(AsyncioByteStream(reader, writer, "laser"))
+
+                server = await asyncio.start_server(handle, "127.0.0.1", 0)
+                self._endpoints.append(server)
+                port = server.sockets[0].getsockname()[1]
+
+                async def open_socket(spec: TcpSpec, port: int = port) -> ByteStream:
+                    return await open_tcp("127.0.0.1", port)
+
+                devices.overrides[name] = open_socket
+                log.info("%s: emulated on 127.0.0.1:%d", name, port)
+
     async def __aenter__(self) -> RaptorSimulation:
         self._start = self.clock.now()
         loop = asyncio.get_running_loop()
         self._tasks = [loop.create_task(self._physics(), name="afa-sim-physics")]
+        if self._exposed:
+            await self._expose_devices()
         if self.world.drive and self._system is not None:
             self._tasks.append(loop.create_task(self._drive_script(), name="afa-sim-drive"))
         return self
@@ -242,6 +291,11 @@ class RaptorSimulation:
                 log.exception("simulation task failed")
         for fake in self.fakes:
             await fake.aclose()
+        for endpoint in self._endpoints:
+            if isinstance(endpoint, asyncio.AbstractServer):
+                endpoint.close()
+            else:
+                await endpoint.close()
 
     @property
     def sim_time(self) -> float:

@@ -101,3 +101,25 @@ def test_cli_sim_fast_writes_the_summary(tmp_path):
         assert key in summary, key
     assert summary["world"] == "rock-field" and summary["sim_time_s"] >= 3.0
     assert math.isfinite(summary["realtime_factor"])
+
+
+async def test_exposed_emulators_go_through_real_ptys_and_loopback_tcp():
+    """The pyserial-asyncio and TCP transports end to end (wall clock: real I/O)."""
+    from afa import WallClock
+
+    clock = WallClock()
+    system = System.from_xml(RAPTOR, clock=clock)
+    simulation = RaptorSimulation(WORLDS / "open-field.xml", clock, expose=True)
+    simulation.attach(system)
+    async with simulation:
+        async with system:
+            await system.run(3.0)  # a bounded run, not a timing assertion
+            events = system.statistics()["events"]
+            health = system.health()
+    for name in ("Gps", "Imu", "RaptorOdometry", "Laser11", "Laser12"):
+        assert events.get(name, 0) > 0, (name, events)
+    for name in ("3dmgService", "GpsSokkiaService", "RaptorOdometryService", "RaptorService",
+                 "NodLaserService", "NodLaserService12"):
+        assert health[name].healthy, (name, health[name].detail)
+    assert simulation._endpoints and all(getattr(e, "closed", True) for e in simulation._endpoints
+                                         if hasattr(e, "path"))
