@@ -153,3 +153,26 @@ def test_the_real_command_line_exit_codes(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "afa", "config", "check", str(path)],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
+
+
+def test_an_unknown_component_type_lists_the_known_ones(tmp_path):
+    from afa import System
+
+    path, _ = mutate(tmp_path, '<parameter name="Type" value="Stereo"/>',
+                     '<parameter name="Type" value="Sterio"/>')
+    with pytest.raises(ConfigError) as info:
+        System.from_xml(path)
+    message = str(info.value)
+    assert "unknown component type 'Sterio'" in message
+    assert "Stereo" in message and "GpsSokkia" in message  # the known types are listed
+
+
+def test_unimplemented_components_are_reported_and_strict_refuses_them():
+    from afa import System
+
+    system = System.from_xml(RAPTOR)
+    reported = " ".join(system.notes)
+    assert "arcArbiter (ArcArbiter) is configured but not implemented yet" in reported
+    assert "arcArbiter" not in system.components
+    with pytest.raises(ConfigError, match="not implemented yet"):
+        System.from_xml(RAPTOR, strict=True)
