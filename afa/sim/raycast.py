@@ -89,7 +89,7 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
 
     found = np.zeros(n_rays, dtype=bool)
     done = 0
-    fine = 2 * block
+    fine = block  # one sample per grid cell; the hit is refined by interpolation
     step = seg / fine
     offsets = step * np.arange(fine + 1)
     take = 1

@@ -132,21 +132,59 @@ _UNIT_CODE = {RangeUnit.CM: 0b00, RangeUnit.MM: 0b01}
 _UNIT_FROM_CODE = {code: unit for unit, code in _UNIT_CODE.items()}
 
 
-def sick_crc16(data: bytes | bytearray | memoryview) -> int:
-    """SICK's CRC-16 of ``data`` (LMS 2xx telegram listing, generator 0x8005).
+def _sick_shift(crc: int) -> int:
+    """One step of SICK's register: shift left, XOR the generator when bit 15 falls out."""
+    return (((crc << 1) & 0xFFFF) ^ _CRC16_SICK_POLY) if crc & 0x8000 else (crc << 1) & 0xFFFF
 
-    The manual's routine: per byte, shift the register left by one (XOR the generator
-    when bit 15 falls out), then XOR the 16-bit word made of this byte (low) and the
-    previous byte (high). No final XOR; transmitted little-endian.
-    """
+
+def sick_crc16_reference(data: bytes | bytearray | memoryview) -> int:
+    """SICK's CRC-16 of ``data``, byte by byte exactly as the LMS 2xx telegram listing
+    writes it (generator 0x8005): per byte, shift the register left by one (XOR the
+    generator when bit 15 falls out), then XOR the 16-bit word made of this byte (low)
+    and the previous byte (high). No final XOR; transmitted little-endian."""
     crc = 0
     previous = 0
     for byte in bytes(data):
-        if crc & 0x8000:
-            crc = ((crc << 1) & 0xFFFF) ^ _CRC16_SICK_POLY
-        else:
-            crc = (crc << 1) & 0xFFFF
-        crc ^= byte | (previous << 8)
+        crc = _sick_shift(crc) ^ (byte | (previous << 8))
+        previous = byte
+    return crc
+
+
+def _shift_power(value: int, times: int) -> int:
+    for _ in range(times):
+        value = _sick_shift(value)
+    return value
+
+
+# The register update is linear over GF(2), so eight bytes at a time is a XOR of table
+# lookups: the register shifted eight times (high and low byte), the byte before the
+# block (it is the high half of the first word), and each byte of the block (low half of
+# its own word, high half of the next one's).
+_BLOCK = 8
+_T_HIGH = tuple(_shift_power(h << 8, _BLOCK) for h in range(256))
+_T_LOW = tuple(_shift_power(v, _BLOCK) for v in range(256))
+_T_PREVIOUS = tuple(_shift_power(v << 8, _BLOCK - 1) for v in range(256))
+_T_BYTE = tuple(
+    tuple(_shift_power(v, _BLOCK - 1 - j)
+          ^ (_shift_power(v << 8, _BLOCK - 2 - j) if j < _BLOCK - 1 else 0)
+          for v in range(256))
+    for j in range(_BLOCK))
+
+
+def sick_crc16(data: bytes | bytearray | memoryview) -> int:
+    """SICK's CRC-16 of ``data`` (:func:`sick_crc16_reference`), eight bytes per step."""
+    raw = bytes(data)
+    crc = previous = 0
+    blocks = len(raw) - len(raw) % _BLOCK
+    t0, t1, t2, t3, t4, t5, t6, t7 = _T_BYTE
+    high, low, before = _T_HIGH, _T_LOW, _T_PREVIOUS
+    for i in range(0, blocks, _BLOCK):
+        b0, b1, b2, b3, b4, b5, b6, b7 = raw[i:i + _BLOCK]
+        crc = (high[crc >> 8] ^ low[crc & 0xFF] ^ before[previous] ^ t0[b0] ^ t1[b1]
+               ^ t2[b2] ^ t3[b3] ^ t4[b4] ^ t5[b5] ^ t6[b6] ^ t7[b7])
+        previous = b7
+    for byte in raw[blocks:]:
+        crc = _sick_shift(crc) ^ (byte | (previous << 8))
         previous = byte
     return crc
 
@@ -530,7 +568,7 @@ def encode_measured_values(values: MeasuredValues) -> bytes:
         raise EOutOfBounds(f"{len(values.raw)} values do not fit the 10-bit count")
     if not 0 <= values.partial_scan_index <= 3:
         raise EOutOfBounds("partial scan index is 0..3")
-    if any(not 0 <= word <= 0xFFFF for word in values.raw):
+    if values.raw and (min(values.raw) < 0 or max(values.raw) > 0xFFFF):
         raise EOutOfBounds("measured value words are 16-bit")
     word = (len(values.raw) | (values.partial_scan_index << 11)
             | (_UNIT_CODE[values.unit] << 14))

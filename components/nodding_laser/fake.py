@@ -329,7 +329,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
             counts = np.where(np.isfinite(ranges), np.round(ranges * 1000.0), -1.0)
             good = (counts >= 1) & (counts < _MAX_COUNT)
         words = np.where(good, counts, NO_RETURN_WORD).astype(np.int64)
-        raw = tuple(int(w) for w in words)
+        raw = tuple(words.tolist())
         return (nod_start, nod_end), MeasuredValues(raw, RangeUnit.MM, 0x10, 0, _RANGE_BITS)
 
     async def _send_scan(self, stream: ByteStream, start: float, end: float) -> None:

@@ -456,9 +456,6 @@ async def test_afa_decode_on_a_capture_the_fake_produced(tmp_path: Path,
                                     "malformed": 0, "bytes_skipped": 2, "bytes": len(data)}}
 
 
-@pytest.mark.xfail(raises=TypeError, strict=False,
-                   reason="afa.cli._jsonable does not serialise datetime.date (Rmc.date): "
-                          "`afa decode gps` stops at the first GPRMC; to be fixed in afa/cli.py")
 def test_afa_decode_on_the_real_swri_capture(capsys: pytest.CaptureFixture[str]) -> None:
     path = DATA / "swri_ascii_nmea.log"
     assert cli_main(["decode", "gps", str(path)]) == 0

@@ -606,3 +606,11 @@ def test_nod_scan_to_points_excludes_no_return_codes() -> None:
         nod_scan_to_points(NodScan(1, 0, 0, 0, MeasuredValues((1000, 1000))))
     assert nod_scan_to_points(NodScan(1, 0, 0, 0, MeasuredValues((1000, 1000))),
                               variant=(100, 100)).shape == (2, 3)
+
+
+@settings(max_examples=200)
+@given(st.binary(max_size=800))
+def test_the_table_driven_crc_equals_the_manuals_byte_by_byte_routine(data):
+    from components.nodding_laser.codec import sick_crc16_reference
+
+    assert sick_crc16(data) == sick_crc16_reference(data)
