@@ -28,13 +28,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from pathlib import Path
 from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass, field
 from enum import Enum
+from pathlib import Path
 from typing import Any, ClassVar, Generic, TypeVar
-
-from idl._base import IDLModel, Interface
 
 from afa.clock import Clock
 from afa.codec import StreamDecoder
@@ -45,6 +43,7 @@ from afa.naming import NameRegistry, join_name
 from afa.polling import LatestSlot, Servant, proxy_for
 from afa.reactor import Backoff, Reactor
 from afa.transport import ByteStream, DeviceOpener, DeviceSpec
+from idl._base import IDLModel, Interface
 
 __all__ = [
     "State", "Context", "Component", "SubscribePublishServer", "PublishServerReactor",

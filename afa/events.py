@@ -27,10 +27,9 @@ from enum import Enum
 from fnmatch import fnmatchcase
 from typing import Any, NamedTuple
 
-from idl._base import IDLModel, idl_types
-
 from afa.clock import Clock, WallClock
 from afa.errors import ChannelClosed
+from idl._base import IDLModel, idl_types
 
 __all__ = ["Event", "EventChannel", "Subscription", "Publisher", "Overflow", "SubscriptionStatistics"]
 

@@ -21,11 +21,11 @@ from collections.abc import Callable
 from functools import cache
 from typing import Any, Generic, TypeVar
 
-from idl._base import Interface, MethodSpec
 from pydantic import TypeAdapter, ValidationError
 
 from afa.clock import Clock
 from afa.errors import AfaError, ComponentError, EDevIO, InterfaceError
+from idl._base import Interface, MethodSpec
 
 __all__ = ["LatestSlot", "Servant", "Proxy", "proxy_for"]
 

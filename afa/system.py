@@ -21,8 +21,6 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-from idl._base import Interface
-
 from afa.clock import Clock, WallClock
 from afa.component import Component, Context, Health, RestartPolicy, State
 from afa.errors import ComponentError, StartupError
@@ -30,6 +28,7 @@ from afa.events import Event, EventChannel
 from afa.naming import NameRegistry, join_name
 from afa.polling import proxy_for
 from afa.transport import DeviceFactory, DeviceOpener
+from idl._base import Interface
 
 __all__ = ["System"]
 

@@ -15,8 +15,8 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 
 from afa.clock import Clock, VirtualClock
-from afa.fake import FakeDevice
 from afa.errors import ETimeOut
+from afa.fake import FakeDevice
 from afa.transport import ByteStream, DeviceSpec, MemoryByteStream, memory_pipe
 
 __all__ = ["VirtualClock", "memory_pipe", "MemoryByteStream", "FakeDevice", "settle", "until",

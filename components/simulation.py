@@ -32,12 +32,12 @@ from typing import Any
 import numpy as np
 
 from afa import ByteStream, Clock, EDevIO, Event, SerialSpec, System, TcpSpec
-from afa.transport import AsyncioByteStream, PtyDeviceStream, open_tcp
 from afa.component import Component
 from afa.sim.raycast import cast_rays, depth_image
 from afa.sim.terrain import Terrain
 from afa.sim.vehicle import Vehicle, VehicleState
 from afa.sim.world import World, load_world
+from afa.transport import AsyncioByteStream, PtyDeviceStream, open_tcp
 from components.gps_sokkia import GpsSokkia
 from components.gps_sokkia.codec import PositionType, latlon_to_utm
 from components.gps_sokkia.fake import FakeGps, GpsNoise, GpsTruth

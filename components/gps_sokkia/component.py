@@ -42,9 +42,6 @@ from afa.events import Publisher
 from afa.polling import LatestSlot
 from afa.reactor import Backoff
 from afa.transport import ByteStream, DeviceSpec, SerialSpec
-from idl import UTM_ZONE_LETTERS, GpsIDL, TimeIDL
-from idl import Gps as GpsInterface
-
 from components.gps_sokkia.codec import (
     BestPos,
     BestUtm,
@@ -63,6 +60,8 @@ from components.gps_sokkia.codec import (
     latlon_to_utm,
 )
 from components.gps_sokkia.parameters import GpsSokkiaParameters
+from idl import UTM_ZONE_LETTERS, GpsIDL, TimeIDL
+from idl import Gps as GpsInterface
 
 __all__ = [
     "GpsSokkia", "EpochCombiner", "Epoch", "LOG_PERIOD", "PUBLISH_PERIOD", "NOVATEL_HOLD",

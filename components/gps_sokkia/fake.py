@@ -35,7 +35,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -44,7 +44,6 @@ from afa.codec import StreamDecoder
 from afa.errors import EDevIO
 from afa.fake import FakeDevice
 from afa.transport import ByteStream
-
 from components.gps_sokkia.codec import (
     KNOTS_TO_MPS,
     BestPos,
@@ -430,7 +429,7 @@ class FakeGps(FakeDevice[GpsCommand]):
                       truth.differential_age if differential else None,
                       truth.base_station_id if differential else "")
             return encode_gga(gga, minute_decimals=4)  # NovAtel's GPGGA precision
-        day = datetime.fromtimestamp(s.unix, timezone.utc).date()
+        day = datetime.fromtimestamp(s.unix, UTC).date()
         if name == "GPRMC":
             rmc = Rmc("GP", utc, has_fix, s.lat if has_fix else None,
                       s.lon if has_fix else None, s.speed / KNOTS_TO_MPS, s.track, day, 0.0,

@@ -13,9 +13,6 @@ import asyncio
 import json
 import logging
 import math
-import os
-import tty
-from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -25,7 +22,7 @@ from afa.cli import main as cli_main
 from afa.errors import TransportClosed
 from afa.events import Event, Subscription
 from afa.testing import serve, until
-from afa.transport import ByteStream, memory_pipe
+from afa.transport import ByteStream, PtyDeviceStream, memory_pipe
 from components.imu import Imu, ImuParameters
 from components.imu.codec import ReadEepromCommand, SetContinuousCommand
 from components.imu.fake import FakeImu, ImuNoise, ImuTruth
@@ -410,68 +407,27 @@ def _wake(future: asyncio.Future[None]) -> None:
         future.set_result(None)
 
 
-class FdStream(ByteStream):
-    """The device side of a pseudo-terminal's controller fd as a ByteStream."""
+class RecordingPty(PtyDeviceStream):
+    """The device end of a pseudo-terminal that keeps every byte the host wrote."""
 
-    def __init__(self, fd: int) -> None:
-        self._fd = fd
-        self._closed = False
-        self.received = bytearray()  # every byte the host wrote, for the test
+    def __init__(self) -> None:
+        super().__init__()
+        self.received = bytearray()
 
     async def read(self, max_bytes: int = 4096) -> bytes:
-        loop = asyncio.get_running_loop()
-        while True:
-            if self._closed:
-                raise TransportClosed("pty closed")
-            try:
-                data = os.read(self._fd, max_bytes)
-            except BlockingIOError:
-                await self._ready(loop.add_reader, loop.remove_reader)
-                continue
-            except OSError as exc:
-                raise TransportClosed(f"pty: {exc}") from exc
-            self.received += data
-            return data
-
-    async def write(self, data: bytes) -> None:
-        loop = asyncio.get_running_loop()
-        view = memoryview(data)
-        while view:
-            try:
-                view = view[os.write(self._fd, view):]
-            except BlockingIOError:  # the host has not read yet: wait until writable
-                await self._ready(loop.add_writer, loop.remove_writer)
-            except OSError as exc:
-                raise TransportClosed(f"pty: {exc}") from exc
-
-    async def _ready(self, add: Callable[..., None], remove: Callable[[int], object]) -> None:
-        """Wait until the loop reports the fd ready (add_reader / add_writer)."""
-        ready: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-        add(self._fd, _wake, ready)
-        try:
-            await ready
-        finally:
-            remove(self._fd)
-
-    async def close(self) -> None:
-        self._closed = True
-
-    @property
-    def closed(self) -> bool:
-        return self._closed
+        data = await super().read(max_bytes)
+        self.received += data
+        return data
 
 
 async def test_through_a_pseudo_terminal_with_pyserial_asyncio():
     from afa.clock import WallClock
 
-    controller, worker = os.openpty()
-    tty.setraw(controller)
-    os.set_blocking(controller, False)
     clock = WallClock()
     fake = FakeImu(clock, turning, accel_gain=8192, gyro_gain=16384)
-    stream = FdStream(controller)
+    stream = RecordingPty()
     serving = asyncio.create_task(fake.serve(stream))
-    imu = Imu("Imu", ImuParameters(Device=os.ttyname(worker), Baudrate=38400))
+    imu = Imu("Imu", ImuParameters(Device=stream.path, Baudrate=38400))
     try:
         async with System([imu], clock=clock) as system:  # no device override
             events = system.channel.subscribe("Raptor", "Imu", maxsize=100)
@@ -482,8 +438,7 @@ async def test_through_a_pseudo_terminal_with_pyserial_asyncio():
         serving.cancel()
         with pytest.raises(asyncio.CancelledError):
             await serving
-        os.close(controller)
-        os.close(worker)
+        await stream.close()
     # the host's bytes on the wire, in order: stop, read 230, read 130, start 0x31
     assert bytes(stream.received[:12]) == bytes.fromhex("100000 2800E6 280082 100031")
     assert stats["gains_from_eeprom"] is True
