@@ -20,22 +20,49 @@ def test_help_lists_the_commands():
 
 
 def test_run_reports_what_is_not_implemented_and_stops_cleanly(tmp_path):
+    # --sim: the test must not open this machine's serial ports or the seed's laser
+    # addresses, which the real-device mode would
     summary = tmp_path / "summary.json"
     result = subprocess.run(
-        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--duration", "0.2",
+        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--sim", "--fast", "--duration", "0.5",
          "--summary", str(summary)],
         capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     data = json.loads(summary.read_text())
-    assert data["sim_time_s"] >= 0.2
+    assert data["sim_time_s"] >= 0.5
     for key in ("wall_time_s", "realtime_factor", "events", "events_dropped",
                 "component_errors", "components", "not_started"):
         assert key in data
     # every configured component either runs or is reported as not implemented yet
     reported = " ".join(data["not_started"])
-    for name in ("TerrainService", "arcArbiter"):
+    for name in ("TerrainService", "arcArbiter", "modelServer", "GpsSokkiaService"):
         assert name in reported or name in data["components"]
     assert "not implemented yet" in result.stderr or not data["not_started"]
+
+
+def test_real_device_mode_reports_absent_devices_as_unhealthy(tmp_path):
+    """Without --sim the drivers open what the XML names; absent devices make their
+    components unhealthy (retrying with backoff) and the run still stops cleanly."""
+    text = RAPTOR.read_text()
+    for device in ("/dev/ttyUSB0", "/dev/ttyS0"):
+        text = text.replace(f'value="{device}"', f'value="{tmp_path}/no-such-port"')
+    for host in ("131.135.74.200", "131.135.74.201"):
+        text = text.replace(f'value="{host}"', 'value="127.0.0.1"')
+    text = text.replace('name="Port" value="24750"', 'name="Port" value="9"')  # discard: closed
+    text = text.replace('value="050917raptor01.XML"',
+                        f'value="{RAPTOR.parent / "050917raptor01.XML"}"')
+    config = tmp_path / "raptor-absent.xml"
+    config.write_text(text)
+    summary = tmp_path / "summary.json"
+    result = subprocess.run(
+        [sys.executable, "-m", "afa", "run", str(config), "--duration", "1", "--summary",
+         str(summary)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    components = json.loads(summary.read_text())["components"]
+    for name in ("3dmgService", "GpsSokkiaService", "RaptorService", "NodLaserService"):
+        assert components[name]["state"] == "running"
+        assert not components[name]["healthy"], components[name]
+    assert "no-such-port" in components["3dmgService"]["detail"]
 
 
 def test_run_with_a_bad_config_exits_2_without_traceback(tmp_path, capsys):
