@@ -43,7 +43,7 @@ from afa.naming import NameRegistry, join_name
 from afa.polling import LatestSlot, Servant, proxy_for
 from afa.reactor import Backoff, Reactor
 from afa.transport import ByteStream, DeviceOpener, DeviceSpec
-from idl._base import IDLModel, Interface
+from idl._base import Interface
 
 __all__ = [
     "State", "Context", "Component", "SubscribePublishServer", "PublishServerReactor",
@@ -147,11 +147,13 @@ class Component:
 
     def statistics(self) -> dict[str, Any]:
         """Counters for health displays and run summaries; extend in subclasses."""
-        return {
-            name: {"delivered": s.statistics().delivered, "dropped": s.statistics().dropped,
-                   "high_water": s.statistics().high_water}
-            for name, s in ((f"{s.domain}/{s.type}", s) for s in self._subscriptions)
-        }
+        stats: dict[str, Any] = {}
+        for subscription in self._subscriptions:
+            counters = subscription.statistics()
+            stats[f"{subscription.domain}/{subscription.type}"] = {
+                "delivered": counters.delivered, "dropped": counters.dropped,
+                "high_water": counters.high_water}
+        return stats
 
     # -- context ---------------------------------------------------------------------
     @property
@@ -356,8 +358,3 @@ class PublishServerReactor(Component, Generic[M]):
             stats.update(self.reactor.statistics())
         return stats
 
-
-def publish_if_subscribed(publisher: Publisher, build: Callable[[], IDLModel]) -> None:
-    """Build and publish an event only when someone subscribes to it."""
-    if publisher.subscribed:
-        publisher.publish(build())
