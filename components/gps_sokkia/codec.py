@@ -266,8 +266,23 @@ class LogHeader:
     receiver_sw_version: int = 0
 
 
+class _HeaderTime:
+    """GPS week and seconds of week of a NovAtel log, from its header."""
+
+    __slots__ = ()
+    header: LogHeader
+
+    @property
+    def gps_week(self) -> int:
+        return self.header.gps_week
+
+    @property
+    def gps_seconds(self) -> float:
+        return self.header.gps_seconds
+
+
 @dataclass(frozen=True, slots=True)
-class BestPos:
+class BestPos(_HeaderTime):
     """BESTPOS (id 42): the receiver's best position.
 
     Heights are above mean sea level; ``undulation_m`` is geoid minus ellipsoid, so the
@@ -298,17 +313,9 @@ class BestPos:
     satellites_l2_above_mask: int = 0
     extended: tuple[int, int, int, int] = (0, 0, 0, 0)
 
-    @property
-    def gps_week(self) -> int:
-        return self.header.gps_week
-
-    @property
-    def gps_seconds(self) -> float:
-        return self.header.gps_seconds
-
 
 @dataclass(frozen=True, slots=True)
-class BestVel:
+class BestVel(_HeaderTime):
     """BESTVEL (id 99): the receiver's best velocity.
 
     The velocity is valid at the header time minus ``latency_s``. ``track_over_ground_deg``
@@ -324,17 +331,9 @@ class BestVel:
     track_over_ground_deg: float
     vertical_speed_m_s: float
 
-    @property
-    def gps_week(self) -> int:
-        return self.header.gps_week
-
-    @property
-    def gps_seconds(self) -> float:
-        return self.header.gps_seconds
-
 
 @dataclass(frozen=True, slots=True)
-class BestUtm:
+class BestUtm(_HeaderTime):
     """BESTUTM (id 726): the best position in UTM coordinates.
 
     ``zone_letter`` is the latitude band; northings in the southern hemisphere carry the
@@ -362,14 +361,6 @@ class BestUtm:
     satellites_l1_above_mask: int = 0
     satellites_l2_above_mask: int = 0
     extended: tuple[int, int, int, int] = (0, 0, 0, 0)
-
-    @property
-    def gps_week(self) -> int:
-        return self.header.gps_week
-
-    @property
-    def gps_seconds(self) -> float:
-        return self.header.gps_seconds
 
 
 @dataclass(frozen=True, slots=True)

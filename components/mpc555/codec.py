@@ -254,16 +254,16 @@ class _Empty(_Message):
     def payload(self) -> bytes:
         return b""
 
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Any:
+        return cls()
+
 
 @dataclass(frozen=True, slots=True)
 class Heartbeat(_Empty):
     """Keep-alive; resets the controller's link watchdog. Empty payload."""
 
     TYPE: ClassVar[MessageType] = MessageType.HEARTBEAT
-
-    @classmethod
-    def from_payload(cls, payload: bytes) -> Heartbeat:
-        return cls()
 
 
 @dataclass(frozen=True, slots=True)
@@ -272,10 +272,6 @@ class StartVehicle(_Empty):
 
     TYPE: ClassVar[MessageType] = MessageType.START_VEHICLE
 
-    @classmethod
-    def from_payload(cls, payload: bytes) -> StartVehicle:
-        return cls()
-
 
 @dataclass(frozen=True, slots=True)
 class StopVehicle(_Empty):
@@ -283,51 +279,46 @@ class StopVehicle(_Empty):
 
     TYPE: ClassVar[MessageType] = MessageType.STOP_VEHICLE
 
-    @classmethod
-    def from_payload(cls, payload: bytes) -> StopVehicle:
-        return cls()
-
 
 _VELOCITY = struct.Struct(">hh")
 
 
+class _Velocity(_Message):
+    """Translation (mm/s) and rotation (mrad/s), each an int16: the two velocity commands."""
+
+    __slots__ = ()
+    LAYOUT: ClassVar[struct.Struct] = _VELOCITY
+    translation_mm_s: int
+    rotation_mrad_s: int
+
+    def payload(self) -> bytes:
+        """Raises ValueError if a field does not fit an int16."""
+        return _pack(self.LAYOUT, self.translation_mm_s, self.rotation_mrad_s)
+
+    @classmethod
+    def from_payload(cls, payload: bytes) -> Any:
+        return cls(*cls.LAYOUT.unpack(payload))
+
+
 @dataclass(frozen=True, slots=True)
-class SetVelocity(_Message):
+class SetVelocity(_Velocity):
     """setVelocity(VelocityIDL): translation (mm/s, forward +), rotation (mrad/s, left +).
 
     The controller turns the pair into a steering angle with :func:`steering_angle`.
     """
 
     TYPE: ClassVar[MessageType] = MessageType.SET_VELOCITY
-    LAYOUT: ClassVar[struct.Struct] = _VELOCITY
     translation_mm_s: int
     rotation_mrad_s: int
-
-    def payload(self) -> bytes:
-        """Raises ValueError if a field does not fit an int16."""
-        return _pack(self.LAYOUT, self.translation_mm_s, self.rotation_mrad_s)
-
-    @classmethod
-    def from_payload(cls, payload: bytes) -> SetVelocity:
-        return cls(*cls.LAYOUT.unpack(payload))
 
 
 @dataclass(frozen=True, slots=True)
-class SetJoystickVelocity(_Message):
+class SetJoystickVelocity(_Velocity):
     """setJoystickVelocity(VelocityIDL): as :class:`SetVelocity`; takes over from autonomy."""
 
     TYPE: ClassVar[MessageType] = MessageType.SET_JOYSTICK_VELOCITY
-    LAYOUT: ClassVar[struct.Struct] = _VELOCITY
     translation_mm_s: int
     rotation_mrad_s: int
-
-    def payload(self) -> bytes:
-        """Raises ValueError if a field does not fit an int16."""
-        return _pack(self.LAYOUT, self.translation_mm_s, self.rotation_mrad_s)
-
-    @classmethod
-    def from_payload(cls, payload: bytes) -> SetJoystickVelocity:
-        return cls(*cls.LAYOUT.unpack(payload))
 
 
 @dataclass(frozen=True, slots=True)
