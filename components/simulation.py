@@ -25,7 +25,7 @@ import asyncio
 import hashlib
 import logging
 import math
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -107,6 +107,7 @@ class RaptorSimulation:
         self._digest = hashlib.sha256()
         self._pose_errors: list[tuple[float, float]] = []
         self.fakes: list[Any] = []
+        self._mounts: dict[str, np.ndarray] = {}
         self._tasks: list[asyncio.Task[None]] = []
         self._system: System | None = None
         self._mpc555: FakeMpc555 | None = None
@@ -118,55 +119,63 @@ class RaptorSimulation:
     def attach(self, system: System) -> None:
         """Install an emulator in place of each device component's real device."""
         self._system = system
+        overrides = system.devices.overrides
         for component in system.components.values():
-            factory = self._emulator(component)
-            if factory is not None:
-                system.devices.overrides[component.name] = factory
-            if self.expose and self.fakes and factory is not None and not isinstance(component, Stereo):
+            if isinstance(component, Stereo):
+                backend = SyntheticBackend(self.clock, render=self._stereo_renderer(component),
+                                           rng=self._rng())
+                overrides[component.name] = serve_camera(backend)
+                continue
+            fake = self._fake_for(component)
+            if fake is None:
+                continue
+            overrides[component.name] = fake.factory()
+            if self.expose:
                 kind = "tcp" if isinstance(component, NodLaser) else "serial"
-                fake = self._mpc555 if isinstance(component, (WheelOdometry, VehicleControl)) \
-                    else self.fakes[-1]
                 self._exposed[component.name] = (fake, kind)
         system.channel.add_tap(self._observe)
 
     def _rng(self) -> np.random.Generator:
         return np.random.default_rng(self._seeds.spawn(1)[0])
 
-    def _emulator(self, component: Component) -> Callable[[Any], Awaitable[Any]] | None:
+    def _fake_for(self, component: Component) -> Any:
+        """The emulator playing ``component``'s device, or None for a non-device."""
         if isinstance(component, GpsSokkia):
             fake: Any = FakeGps(self.clock, self._gps_truth, self._rng(), noise=GPS_NOISE)
         elif isinstance(component, Imu):
             fake = FakeImu(self.clock, self._imu_truth, rng=self._rng())
         elif isinstance(component, (WheelOdometry, VehicleControl)):
-            if self._mpc555 is None:
-                self._mpc555 = FakeMpc555(self.clock, plant=self._plant)
-                self.fakes.append(self._mpc555)
-            return self._mpc555.factory()
+            if self._mpc555 is not None:  # one controller serves both components
+                return self._mpc555
+            fake = self._mpc555 = FakeMpc555(self.clock, plant=self._plant)
         elif isinstance(component, NodLaser):
             fake = FakeNodLaser(self.clock, source=self._laser_source(component),
                                 offset_deg=component.parameters.LaserOffsetAngle,
                                 rng=self._rng())
-        elif isinstance(component, Stereo):
-            backend = SyntheticBackend(self.clock, render=self._stereo_renderer(component),
-                                       rng=self._rng())
-            return serve_camera(backend)
         else:
             return None
         self.fakes.append(fake)
-        return fake.factory()
+        return fake
 
     # -- ground truth for the emulators ----------------------------------------------------
     @property
     def state(self) -> VehicleState:
         return self.vehicle.state
 
+    def _mount(self, frame: str) -> np.ndarray:
+        """^V T_frame from the geometry model (constant: looked up once per frame)."""
+        mount = self._mounts.get(frame)
+        if mount is None:
+            mount = self._mounts[frame] = self.geometry.transformation(VEHICLE_FRAME, frame)
+        return mount
+
     def _frame(self, frame: str) -> np.ndarray:
         """^W T_frame now: vehicle pose times the geometry model's ^V T_frame."""
-        return self.state.transform() @ self.geometry.transformation(VEHICLE_FRAME, frame)
+        return self.state.transform() @ self._mount(frame)
 
     def _gps_truth(self, t: float) -> GpsTruth:
         state = self.state
-        antenna = self.geometry.transformation(VEHICLE_FRAME, "GpsAntenna:PhaseCenter")[:3, 3]
+        antenna = self._mount("GpsAntenna:PhaseCenter")[:3, 3]
         rotation = state.rotation()
         position = state.position + rotation @ antenna
         omega = rotation @ state.angular_velocity_body()
@@ -181,7 +190,7 @@ class RaptorSimulation:
 
     def _imu_truth(self, t: float) -> ImuTruth:
         state = self.state
-        mount = self.geometry.transformation(VEHICLE_FRAME, "Imu:SensorCenter")[:3, :3]
+        mount = self._mount("Imu:SensorCenter")[:3, :3]
         to_sensor = mount.T  # sensor-from-vehicle
         # The 3DM-GX1's angles are NED-style (x forward, y right, z down).
         yaw = math.remainder(math.pi / 2 - state.yaw, 2 * math.pi)

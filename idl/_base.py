@@ -111,7 +111,8 @@ class Array:
             raise PydanticCustomError("ndarray", "not an array of {dtype}: {err}",
                                       {"dtype": self.dtype, "err": str(exc)}) from None
         if array.ndim != len(self.shape) or any(
-            want is not None and got != want for got, want in zip(array.shape, self.shape, strict=True)
+            want is not None and got != want
+            for got, want in zip(array.shape, self.shape, strict=True)
         ):
             raise PydanticCustomError(
                 "ndarray_shape", "array shape {got} does not match {want}",
