@@ -47,103 +47,128 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     here. A ray starting below the surface has range 0. Raises ValueError for bad shapes,
     a non-positive ``max_range`` or a zero direction.
     """
-    d = np.atleast_2d(np.asarray(directions, dtype=np.float64))
+    d = np.asarray(directions, dtype=np.float64)
+    if d.ndim == 1:
+        d = d[None, :]
     if d.ndim != 2 or d.shape[1] != 3:
         raise ValueError(f"directions must have shape (N, 3), got {d.shape}")
     o = np.asarray(origins, dtype=np.float64)
-    if o.shape == (3,):
-        o = np.broadcast_to(o, d.shape)
-    if o.shape != d.shape:
+    shared = o.shape == (3,)
+    if not shared and o.shape != d.shape:
         raise ValueError(f"origins must have shape (3,) or {d.shape}, got {o.shape}")
     if not (math.isfinite(max_range) and max_range > 0):
         raise ValueError("max_range must be finite and > 0")
-    norm = np.linalg.norm(d, axis=1)
-    if not np.all(norm > 0):
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    if not (length > 0).all():
         raise ValueError("directions must be non-zero")
-    d = d / norm[:, None]
     n_rays = d.shape[0]
     ranges = np.full(n_rays, np.nan)
     if n_rays == 0:
         return ranges
+    dx, dy, dz = (d / length[:, None]).T
+    # per-ray origins as (N, 1) columns, a shared one as scalars (broadcast either way)
+    ox, oy, oz = (o.tolist() if shared else (o[:, 0:1], o[:, 1:2], o[:, 2:3]))
 
     res = terrain.resolution
     seg = block * res
     n_seg = int(math.ceil(max_range / seg))
-    bmax = terrain.block_max(block)
-    by, bx = bmax.shape
 
     # ---- coarse pass: which segments could touch the surface
-    # z is linear along a segment: its lowest point is the start, or the end if falling
+    blocks = terrain.block_max(block)
+    by, bx = blocks.shape
+    bmax = blocks.ravel()
     starts = seg * np.arange(n_seg)
-    dz = d[:, 2:3]
-    z_low = (o[:, 2:3] + np.minimum(dz, 0.0) * seg) + dz * starts
-    # block coordinates of segment midpoints, offset into the padded block array
     mid = starts + 0.5 * seg
-    ax = (o[:, 0:1] - terrain.east0) / seg + BLOCK_PAD
-    ay = (o[:, 1:2] - terrain.north0) / seg + BLOCK_PAD
-    bi = np.clip(ax + (d[:, 0:1] / seg) * mid, 0, bx - 1).astype(np.intp)
-    bj = np.clip(ay + (d[:, 1:2] / seg) * mid, 0, by - 1).astype(np.intp)
-    candidate = z_low <= bmax[bj, bi]
+    # z is linear along a segment: its lowest point is the start, or the end if falling
+    z_low = (oz + np.minimum(dz, 0.0)[:, None] * seg) + dz[:, None] * starts
+    # block coordinates of segment midpoints, offset into the padded block array
+    bi = (ox - terrain.east0) / seg + BLOCK_PAD + (dx / seg)[:, None] * mid
+    bj = (oy - terrain.north0) / seg + BLOCK_PAD + (dy / seg)[:, None] * mid
+    np.clip(bi, 0, bx - 1, out=bi)
+    np.clip(bj, 0, by - 1, out=bj)
+    cell = bj.astype(np.intp)
+    cell *= bx
+    cell += bi.astype(np.intp)
+    candidate = z_low <= bmax.take(cell)
     rank = np.cumsum(candidate, axis=1, dtype=np.int32)
     total = rank[:, -1]
 
+    # ---- fine passes, in grid units of the padded surface (off-grid points need no mask)
+    padded = terrain.padded_surface()
+    surface, width = padded.ravel(), padded.shape[1]
+    gx = (ox - terrain.east0) / res + 1.0
+    gy = (oy - terrain.north0) / res + 1.0
+    gdx, gdy = dx / res, dy / res
+    x_max, y_max = terrain.nx + 1.0 - 1e-9, terrain.ny + 1.0 - 1e-9
+    reach = n_seg * block + 1.0  # grid steps to the last sample of the last segment
+    clamp = not (shared and reach <= gx <= x_max - reach and reach <= gy <= y_max - reach)
     found = np.zeros(n_rays, dtype=bool)
     done = 0
-    fine = block  # one sample per grid cell; the hit is refined by interpolation
-    step = seg / fine
-    offsets = step * np.arange(fine + 1)
-    take = 1
+    step = res  # one sample per grid cell; the hit is refined by interpolation
+    offsets = step * np.arange(block + 1)
+    take = 3
     while True:
         todo = ~found & (total > done)
         if not todo.any():
             break
         # the next `take` candidate segments of every unfinished ray; most rays hit in
         # their first, so start with one and double for the stragglers
-        sel = candidate & (rank > done) & (rank <= done + take) & todo[:, None]
+        sel = (rank > done) & (rank <= done + take) & candidate & todo[:, None]
         done += take
         take *= 2
         ray, segment = np.nonzero(sel)
-        t = segment[:, None] * seg + offsets[None, :]
-        ox, oy, oz = o[ray, 0:1], o[ray, 1:2], o[ray, 2:3]
-        dx, dy, dz = d[ray, 0:1], d[ray, 1:2], d[ray, 2:3]
-        dist = (oz + dz * t) - _surface(terrain, ox + dx * t, oy + dy * t)
+        t = (segment * seg)[:, None] + offsets
+        if shared:
+            x0, y0, z0 = gx, gy, oz
+        else:
+            x0, y0, z0 = gx[ray], gy[ray], oz[ray]
+        fx = x0 + gdx[ray, None] * t
+        fy = y0 + gdy[ray, None] * t
+        dist = (z0 + dz[ray, None] * t) - _bilinear(surface, width, fx, fy, x_max, y_max, clamp)
         below = dist <= 0
-        has = below.any(axis=1)
+        first = below.argmax(axis=1)
+        rows = np.arange(len(ray))
+        has = below[rows, first]
         if not has.any():
             continue
-        rows = np.nonzero(has)[0]
-        first = np.argmax(below[rows], axis=1)
-        t_hit = t[rows, first]
-        prev = np.maximum(first - 1, 0)
-        d0 = dist[rows, prev]
-        d1 = dist[rows, first]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            frac = d0 / (d0 - d1)
-        refine = (first > 0) & np.isfinite(frac)
-        t_hit = np.where(refine, t[rows, prev] + np.clip(frac, 0.0, 1.0) * step, t_hit)
+        rows, first = rows[has], first[has]
         # rows are ordered by ray then segment: the first row of each ray is its nearest hit
-        hit_rays, first_row = np.unique(ray[rows], return_index=True)
-        t_hit = t_hit[first_row]
+        hit_rays = ray[rows]
+        nearest = np.ones(len(rows), dtype=bool)
+        np.not_equal(hit_rays[1:], hit_rays[:-1], out=nearest[1:])
+        rows, first, hit_rays = rows[nearest], first[nearest], hit_rays[nearest]
+        t_hit = t[rows, first]
+        # the sample before the first one below is above (dist > 0): interpolate between
+        refine = first > 0
+        if refine.any():
+            r, p = rows[refine], first[refine] - 1
+            above = dist[r, p]
+            t_hit[refine] = t[r, p] + above / (above - dist[r, p + 1]) * step
         ranges[hit_rays] = np.where(t_hit <= max_range, t_hit, np.nan)
         found[hit_rays] = True
     return ranges
 
 
-def _surface(terrain: Terrain, east: FloatArray, north: FloatArray) -> FloatArray:
-    """Bilinear surface height; -inf off the grid (nothing to hit there)."""
-    fx = (east - terrain.east0) / terrain.resolution
-    fy = (north - terrain.north0) / terrain.resolution
-    inside = (fx >= 0) & (fx <= terrain.nx - 1) & (fy >= 0) & (fy <= terrain.ny - 1)
-    fx = np.clip(fx, 0.0, terrain.nx - 1.0)
-    fy = np.clip(fy, 0.0, terrain.ny - 1.0)
-    i = np.minimum(fx.astype(np.intp), terrain.nx - 2)
-    j = np.minimum(fy.astype(np.intp), terrain.ny - 2)
+def _bilinear(flat: NDArray[np.float32], width: int, fx: FloatArray, fy: FloatArray,
+              x_max: float, y_max: float, clamp: bool) -> FloatArray:
+    """Bilinear height at padded-grid coordinates ``fx``, ``fy`` (overwritten), clamped
+    onto the grid and its border unless the caller knows they are well inside."""
+    if clamp:
+        np.clip(fx, 0.0, x_max, out=fx)
+        np.clip(fy, 0.0, y_max, out=fy)
+    i = fx.astype(np.intp)
+    j = fy.astype(np.intp)
     tx = fx - i
     ty = fy - j
-    grid = terrain.surface
-    z = ((grid[j, i] * (1 - tx) + grid[j, i + 1] * tx) * (1 - ty)
-         + (grid[j + 1, i] * (1 - tx) + grid[j + 1, i + 1] * tx) * ty)
-    return np.where(inside, z, -np.inf)
+    k = j * width + i
+    z00 = flat.take(k)
+    z01 = flat.take(k + 1)
+    k += width
+    z10 = flat.take(k)
+    z11 = flat.take(k + 1)
+    near = z00 + (z01 - z00) * tx
+    far = z10 + (z11 - z10) * tx
+    return near + (far - near) * ty
 
 
 def laser_directions(rotation: ArrayLike, bearings: ArrayLike) -> FloatArray:

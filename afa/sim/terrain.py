@@ -28,10 +28,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from afa.sim.world import Obstacle, TerrainSpec
 
-__all__ = ["Terrain", "ROUGHNESS_MODES", "ROUGHNESS_WAVELENGTHS", "BLOCK_PAD"]
+__all__ = ["Terrain", "ROUGHNESS_MODES", "ROUGHNESS_WAVELENGTHS", "BLOCK_PAD", "OFF_GRID_HEIGHT"]
 
 #: Padding (in blocks) around :meth:`Terrain.block_max`'s array.
 BLOCK_PAD = 2
+
+#: Height of the border around :meth:`Terrain.padded_surface`: far below anything a
+#: ray can reach, finite so that interpolating towards it stays a number.
+OFF_GRID_HEIGHT = -1e30
 
 #: Number of Fourier modes in the roughness field.
 ROUGHNESS_MODES = 48
@@ -61,6 +65,7 @@ class Terrain:
         for array in (self.ground, self.surface, self.ids):
             array.flags.writeable = False
         self._block_cache: dict[int, NDArray[np.float32]] = {}
+        self._padded: NDArray[np.float32] | None = None
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -174,6 +179,17 @@ class Terrain:
         z10 = grid[j + 1, i]
         z11 = grid[j + 1, i + 1]
         return (z00 * (1 - tx) + z01 * tx) * (1 - ty) + (z10 * (1 - tx) + z11 * tx) * ty
+
+    def padded_surface(self) -> NDArray[np.float32]:
+        """The surface inside a one-sample border at :data:`OFF_GRID_HEIGHT` (cached):
+        bilinear lookups clamped onto the border fall towards "nothing here", so ray
+        casting needs no off-grid mask. Element ``[j + 1, i + 1]`` is ``surface[j, i]``."""
+        if self._padded is None:
+            padded = np.full((self.ny + 2, self.nx + 2), OFF_GRID_HEIGHT, dtype=np.float32)
+            padded[1:-1, 1:-1] = self.surface
+            padded.flags.writeable = False
+            self._padded = padded
+        return self._padded
 
     def block_max(self, block: int) -> NDArray[np.float32]:
         """Conservative maxima for ray casting, cached per block size.

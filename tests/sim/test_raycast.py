@@ -90,32 +90,59 @@ def test_depth_image_of_wall() -> None:
     assert depth[29, 20] == pytest.approx(1.5 / v, rel=1e-6)
 
 
-def test_brute_force_agreement_on_rough_terrain_with_obstacles() -> None:
+def _rough_world() -> Terrain:
     spec = TerrainSpec(width=40, depth=40, resolution=0.1, roughness=0.15, seed=4,
                        slope_east=0.03)
     obstacles = [Obstacle("box", east=6, north=2, length=2, width=1, height=1.0, heading=20),
                  Obstacle("cylinder", east=-5, north=-4, radius=0.6, height=1.5),
                  Obstacle("ditch", east=3, north=-6, length=8, width=2, depth=1.0, heading=60)]
-    terrain = Terrain.from_spec(spec, obstacles)
-    rng = np.random.default_rng(9)
-    n = 60
-    origins = np.column_stack([rng.uniform(-10, 10, n), rng.uniform(-10, 10, n),
-                               rng.uniform(1.0, 3.0, n)])
-    az = rng.uniform(0, 2 * math.pi, n)
-    el = rng.uniform(-math.radians(40), math.radians(3), n)
-    directions = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-    ranges = cast_rays(terrain, origins, directions, 25.0)
-    # oracle: a plain 5 mm march per ray against Terrain.height
-    t = np.arange(0.0, 25.0, 0.005)
-    for k in range(n):
+    return Terrain.from_spec(spec, obstacles)
+
+
+def _brute_force(terrain: Terrain, origins: np.ndarray, directions: np.ndarray,
+                 max_range: float) -> np.ndarray:
+    """The oracle: a plain 5 mm march per ray against Terrain.height."""
+    t = np.arange(0.0, max_range, 0.005)
+    out = np.full(len(directions), np.nan)
+    for k in range(len(directions)):
         points = origins[k] + t[:, None] * directions[k]
         inside = terrain.contains(points[:, 0], points[:, 1])
         below = (points[:, 2] <= terrain.height(points[:, 0], points[:, 1])) & inside
         if below.any():
-            assert ranges[k] == pytest.approx(t[np.argmax(below)], abs=0.01), k
-        else:
-            assert math.isnan(ranges[k]), k
+            out[k] = t[np.argmax(below)]
+    return out
+
+
+def _random_directions(rng: np.random.Generator, n: int) -> np.ndarray:
+    az = rng.uniform(0, 2 * math.pi, n)
+    el = rng.uniform(-math.radians(40), math.radians(3), n)
+    return np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+
+def test_brute_force_agreement_on_rough_terrain_with_obstacles() -> None:
+    terrain = _rough_world()
+    rng = np.random.default_rng(9)
+    n = 60
+    origins = np.column_stack([rng.uniform(-10, 10, n), rng.uniform(-10, 10, n),
+                               rng.uniform(1.0, 3.0, n)])
+    directions = _random_directions(rng, n)
+    ranges = cast_rays(terrain, origins, directions, 25.0)
+    expected = _brute_force(terrain, origins, directions, 25.0)
+    np.testing.assert_array_equal(np.isnan(ranges), np.isnan(expected))
+    np.testing.assert_allclose(ranges, expected, atol=0.01)
     assert np.isfinite(ranges).sum() > n // 2
+
+
+@pytest.mark.parametrize("origin", [(-8.0, 10.0, 1.8),  # well inside: no clamping needed
+                                    (18.5, 17.0, 1.2)])  # rays leave the grid
+def test_brute_force_agreement_from_one_origin(origin: tuple[float, float, float]) -> None:
+    terrain = _rough_world()
+    directions = _random_directions(np.random.default_rng(3), 80)
+    ranges = cast_rays(terrain, origin, directions, 8.183)
+    expected = _brute_force(terrain, np.tile(origin, (80, 1)), directions, 8.183)
+    np.testing.assert_array_equal(np.isnan(ranges), np.isnan(expected))
+    np.testing.assert_allclose(ranges, expected, atol=0.01)
+    assert np.isfinite(ranges).sum() > 20
 
 
 def test_rays_leaving_the_grid_and_starting_underground() -> None:
