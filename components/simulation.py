@@ -217,10 +217,19 @@ class RaptorSimulation:
                  "FrontNoddingSICKRight:AxleCenterFreeEnd")
         max_range = 8.183
 
+        beams: list[np.ndarray] = []  # the last bearings seen, their sines and -cosines
+
         def source(t: float, nod_deg: np.ndarray, bearings_deg: np.ndarray) -> np.ndarray:
             pose = self._frame(frame)
-            b, n = np.deg2rad(bearings_deg), np.deg2rad(nod_deg)
-            local = np.stack([np.sin(b) * np.cos(n), -np.cos(b), np.sin(b) * np.sin(n)], axis=1)
+            if not beams or beams[0] is not bearings_deg:  # the fake reuses one array
+                b = np.deg2rad(bearings_deg)
+                beams[:] = [bearings_deg, np.sin(b), -np.cos(b)]
+            _, sin_b, minus_cos_b = beams
+            n = np.deg2rad(nod_deg)
+            local = np.empty((sin_b.size, 3))
+            np.multiply(sin_b, np.cos(n), out=local[:, 0])
+            local[:, 1] = minus_cos_b
+            np.multiply(sin_b, np.sin(n), out=local[:, 2])
             ranges = cast_rays(self.terrain, pose[:3, 3], local @ pose[:3, :3].T, max_range)
             return np.where(np.isnan(ranges), np.inf, ranges)
 

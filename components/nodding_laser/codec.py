@@ -26,8 +26,12 @@ reads a raw LMS serial stream (either direction), for the controller's RS-422 si
 
 from __future__ import annotations
 
+import array
 import binascii
+import functools
+import math
 import struct
+import sys
 from dataclasses import dataclass
 from enum import IntEnum, StrEnum
 from typing import TypeAlias
@@ -43,7 +47,7 @@ __all__ = [
     "CMD_SWITCH_MODE", "CMD_REQUEST_VALUES", "CMD_SWITCH_VARIANT",
     "REPLY_SWITCH_MODE", "REPLY_MEASURED_VALUES", "REPLY_SWITCH_VARIANT",
     "REPLY_NOT_ACKNOWLEDGED", "SCAN_VARIANTS", "NO_RETURN_CODES",
-    "SickMode", "RangeUnit", "sick_crc16",
+    "SickMode", "RangeUnit", "sick_crc16", "ScanLineGeometry",
     "SickTelegram", "SickAck", "SwitchOperatingMode", "RequestMeasuredValues",
     "SwitchVariant", "OperatingModeReply", "VariantReply", "MeasuredValues",
     "SickMessage", "encode_sick_telegram", "parse_sick_telegram", "telegram_to_message",
@@ -150,43 +154,47 @@ def sick_crc16_reference(data: bytes | bytearray | memoryview) -> int:
     return crc
 
 
-def _shift_power(value: int, times: int) -> int:
-    for _ in range(times):
-        value = _sick_shift(value)
-    return value
+#: Longest input :func:`sick_crc16` handles with its table (a telegram is at most 816).
+_CRC_SPAN = 1024
 
 
-# The register update is linear over GF(2), so eight bytes at a time is a XOR of table
-# lookups: the register shifted eight times (high and low byte), the byte before the
-# block (it is the high half of the first word), and each byte of the block (low half of
-# its own word, high half of the next one's).
-_BLOCK = 8
-_T_HIGH = tuple(_shift_power(h << 8, _BLOCK) for h in range(256))
-_T_LOW = tuple(_shift_power(v, _BLOCK) for v in range(256))
-_T_PREVIOUS = tuple(_shift_power(v << 8, _BLOCK - 1) for v in range(256))
-_T_BYTE = tuple(
-    tuple(_shift_power(v, _BLOCK - 1 - j)
-          ^ (_shift_power(v << 8, _BLOCK - 2 - j) if j < _BLOCK - 1 else 0)
-          for v in range(256))
-    for j in range(_BLOCK))
+@functools.cache
+def _crc_contributions() -> npt.NDArray[np.uint16]:
+    """Flattened (_CRC_SPAN, 256) table: what byte ``v`` adds to the CRC when ``k`` bytes
+    follow it, at ``[k * 256 + v]``.
+
+    The register update is linear over GF(2) (shift ``L``, then XOR the word of this byte
+    and the previous one), so the CRC of ``n`` bytes is the XOR over the bytes of
+    ``L^k(v) ^ L^(k-1)(v << 8)`` (the byte as the low half of its own word, then as the
+    high half of the next one's).
+    """
+    def shift(x: npt.NDArray[np.uint32]) -> npt.NDArray[np.uint32]:
+        return ((x << 1) & 0xFFFF) ^ np.where(x & 0x8000, _CRC16_SICK_POLY, 0).astype(np.uint32)
+
+    low = np.arange(256, dtype=np.uint32)  # L^k(v)
+    high = low << 8  # L^k(v << 8)
+    table = np.empty((_CRC_SPAN, 256), dtype=np.uint16)
+    table[0] = low
+    for k in range(1, _CRC_SPAN):
+        low = shift(low)
+        table[k] = low ^ high
+        high = shift(high)
+    table.flags.writeable = False
+    return table.ravel()
+
+
+_CRC_OFFSETS = np.arange(_CRC_SPAN - 1, -1, -1, dtype=np.intp) * 256
 
 
 def sick_crc16(data: bytes | bytearray | memoryview) -> int:
-    """SICK's CRC-16 of ``data`` (:func:`sick_crc16_reference`), eight bytes per step."""
-    raw = bytes(data)
-    crc = previous = 0
-    blocks = len(raw) - len(raw) % _BLOCK
-    t0, t1, t2, t3, t4, t5, t6, t7 = _T_BYTE
-    high, low, before = _T_HIGH, _T_LOW, _T_PREVIOUS
-    for i in range(0, blocks, _BLOCK):
-        b0, b1, b2, b3, b4, b5, b6, b7 = raw[i:i + _BLOCK]
-        crc = (high[crc >> 8] ^ low[crc & 0xFF] ^ before[previous] ^ t0[b0] ^ t1[b1]
-               ^ t2[b2] ^ t3[b3] ^ t4[b4] ^ t5[b5] ^ t6[b6] ^ t7[b7])
-        previous = b7
-    for byte in raw[blocks:]:
-        crc = _sick_shift(crc) ^ (byte | (previous << 8))
-        previous = byte
-    return crc
+    """SICK's CRC-16 of ``data`` (:func:`sick_crc16_reference`): one table lookup per
+    byte, XORed together in numpy."""
+    raw = np.frombuffer(data, dtype=np.uint8)
+    if raw.size > _CRC_SPAN:
+        return sick_crc16_reference(data)
+    if raw.size == 0:
+        return 0
+    return int(np.bitwise_xor.reduce(_crc_contributions().take(_CRC_OFFSETS[-raw.size:] + raw)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -307,9 +315,7 @@ class MeasuredValues:
 
     def ranges_array(self) -> npt.NDArray[np.float32]:
         """Ranges in metres as a float32 array (no-return codes included)."""
-        mask = (1 << self.range_bits) - 1
-        counts = np.asarray(self.raw, dtype=np.uint32) & mask
-        return (counts * self.unit.metres).astype(np.float32)
+        return self.ranges_and_valid()[0]
 
     @property
     def no_return_threshold(self) -> int:
@@ -318,9 +324,14 @@ class MeasuredValues:
 
     def valid_mask(self) -> npt.NDArray[np.bool_]:
         """True for values that are ranges: not zero and not a no-return code."""
-        mask = (1 << self.range_bits) - 1
-        counts = np.asarray(self.raw, dtype=np.uint32) & mask
-        return (counts > 0) & (counts < self.no_return_threshold)
+        return self.ranges_and_valid()[1]
+
+    def ranges_and_valid(self) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+        """:meth:`ranges_array` and :meth:`valid_mask` from one conversion of ``raw``."""
+        counts = np.array(self.raw, dtype=np.uint32)
+        counts &= (1 << self.range_bits) - 1
+        valid = (counts > 0) & (counts < self.no_return_threshold)
+        return (counts * self.unit.metres).astype(np.float32), valid
 
     @property
     def scan_angle_deg(self) -> int | None:
@@ -568,11 +579,15 @@ def encode_measured_values(values: MeasuredValues) -> bytes:
         raise EOutOfBounds(f"{len(values.raw)} values do not fit the 10-bit count")
     if not 0 <= values.partial_scan_index <= 3:
         raise EOutOfBounds("partial scan index is 0..3")
-    if values.raw and (min(values.raw) < 0 or max(values.raw) > 0xFFFF):
-        raise EOutOfBounds("measured value words are 16-bit")
     word = (len(values.raw) | (values.partial_scan_index << 11)
             | (_UNIT_CODE[values.unit] << 14))
-    data = struct.pack(f"<H{len(values.raw)}H", word, *values.raw)
+    try:
+        words = array.array("H", (word, *values.raw))
+    except OverflowError:
+        raise EOutOfBounds("measured value words are 16-bit") from None
+    if sys.byteorder == "big":  # pragma: no cover - the telegram is little-endian
+        words.byteswap()
+    data = words.tobytes()
     return encode_sick_telegram(REPLY_MEASURED_VALUES, data, address=values.address,
                                 status=values.status)
 
@@ -1060,6 +1075,43 @@ def scan_bearings_deg(count: int, scan_angle_deg: int, resolution_cdeg: int) -> 
     return start + np.arange(count, dtype=np.float64) * (resolution_cdeg / 100)
 
 
+class ScanLineGeometry:
+    """The beams of one scan variant, their sines and cosines computed once: turns each
+    scan line into 3-D points with a handful of array operations (the driver's path).
+
+    Frame and formula as :func:`scan_line_to_points`.
+    """
+
+    def __init__(self, bearings_deg: npt.ArrayLike) -> None:
+        bearings = np.deg2rad(np.asarray(bearings_deg, dtype=np.float64).reshape(-1))
+        self.count = bearings.size
+        self._sin = np.sin(bearings)
+        self._cos = np.cos(bearings)
+        # where each beam lies between the first (0) and the last (1)
+        self._fraction = (np.arange(self.count) / (self.count - 1) if self.count > 1
+                          else np.zeros(self.count))
+
+    def points(self, ranges_m: npt.ArrayLike,
+               nod_deg: float | tuple[float, float]) -> npt.NDArray[np.float64]:
+        """(count, 3) points of every beam, whatever its range (filter them yourself).
+
+        Raises :class:`~afa.errors.EOutOfBounds` if there are not ``count`` ranges.
+        """
+        r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
+        if r.size != self.count:
+            raise EOutOfBounds(f"{r.size} ranges but {self.count} bearings")
+        start, end = nod_deg if isinstance(nod_deg, tuple) else (nod_deg, nod_deg)
+        start = math.radians(start)
+        nod = start + (math.radians(end) - start) * self._fraction
+        forward = r * self._sin
+        out = np.empty((self.count, 3))
+        np.multiply(forward, np.cos(nod), out=out[:, 0])
+        np.multiply(r, self._cos, out=out[:, 1])
+        np.negative(out[:, 1], out=out[:, 1])
+        np.multiply(forward, np.sin(nod), out=out[:, 2])
+        return out
+
+
 def scan_line_to_points(ranges_m: npt.ArrayLike, bearings_deg: npt.ArrayLike,
                         nod_deg: float | tuple[float, float],
                         valid: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
@@ -1074,26 +1126,17 @@ def scan_line_to_points(ranges_m: npt.ArrayLike, bearings_deg: npt.ArrayLike,
     array lengths differ.
     """
     r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
-    b = np.deg2rad(np.asarray(bearings_deg, dtype=np.float64).reshape(-1))
+    b = np.asarray(bearings_deg, dtype=np.float64).reshape(-1)
     if r.shape != b.shape:
         raise EOutOfBounds(f"{r.size} ranges but {b.size} bearings")
-    if isinstance(nod_deg, tuple):
-        start, end = nod_deg
-        if r.size > 1:
-            nod = np.deg2rad(start + (end - start) * np.arange(r.size) / (r.size - 1))
-        else:
-            nod = np.full(r.shape, np.deg2rad(start))
-    else:
-        nod = np.full(r.shape, np.deg2rad(float(nod_deg)))
     keep = np.isfinite(r) & (r > 0)
     if valid is not None:
         mask = np.asarray(valid, dtype=bool).reshape(-1)
         if mask.shape != r.shape:
             raise EOutOfBounds(f"{r.size} ranges but {mask.size} validity flags")
         keep &= mask
-    r, b, nod = r[keep], b[keep], nod[keep]
-    forward = r * np.sin(b)
-    return np.column_stack((forward * np.cos(nod), -r * np.cos(b), forward * np.sin(nod)))
+    with np.errstate(invalid="ignore"):
+        return ScanLineGeometry(b).points(r, nod_deg)[keep]
 
 
 def nod_scan_to_points(scan: NodScan, *, offset_deg: float = 0.0,

@@ -50,6 +50,7 @@ from components.nodding_laser.codec import (
     NodScan,
     OperatingModeReply,
     RequestStatus,
+    ScanLineGeometry,
     SetNodLimits,
     SetNodRate,
     SickCommand,
@@ -62,7 +63,6 @@ from components.nodding_laser.codec import (
     VariantReply,
     encode_host_command,
     scan_bearings_deg,
-    scan_line_to_points,
     udeg,
 )
 from components.nodding_laser.parameters import NodLaserParameters
@@ -259,7 +259,8 @@ class NodLaser(PublishServerReactor[ControllerMessage]):
         self.scan_period = SCAN_PERIODS[self.variant[1]]
         self.plan = nod_plan(p, adaptive=self.adaptive)
         self.frame = laser_frame(p.LaserID)
-        self._bearings = scan_bearings_deg(self._expected_count, *self.variant)
+        self._expected_count = next(n for n, v in SCAN_VARIANTS.items() if v == self.variant)
+        self._geometry = ScanLineGeometry(scan_bearings_deg(self._expected_count, *self.variant))
         self._seq = 0
         self._offset: float | None = None  # host time - controller time, estimated
         self._last_receipt = 0.0
@@ -268,10 +269,6 @@ class NodLaser(PublishServerReactor[ControllerMessage]):
         self.controller_status: ControllerStatus | None = None
         self.counters = {"scans": 0, "scans_lost": 0, "scans_rejected": 0,
                          "commands_rejected": 0, "array_events": 0, "seq_events": 0}
-
-    @property
-    def _expected_count(self) -> int:
-        return next(n for n, v in SCAN_VARIANTS.items() if v == self.variant)
 
     @property
     def array_event_name(self) -> str:
@@ -340,10 +337,9 @@ class NodLaser(PublishServerReactor[ControllerMessage]):
 
         offset = self.parameters.LaserOffsetAngle
         nod_start, nod_end = scan.nod_start_deg + offset, scan.nod_end_deg + offset
-        valid = measured.valid_mask()
-        points = np.full((measured.count, 3), np.nan, dtype=np.float32)
-        points[valid] = scan_line_to_points(measured.ranges_array(), self._bearings,
-                                            (nod_start, nod_end), valid)
+        ranges, valid = measured.ranges_and_valid()
+        points = self._geometry.points(ranges, (nod_start, nod_end)).astype(np.float32)
+        points[~valid] = np.nan
         points.flags.writeable = False
         valid.flags.writeable = False
         line = _ScanLine(TimeIDL.from_seconds(stamp), self.parameters.LaserID, self.frame,

@@ -23,6 +23,7 @@ Gaussian noise; no-return beams carry code 0x1FFF.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -72,6 +73,18 @@ from components.nodding_laser.codec import (
 from components.nodding_laser.component import SCAN_PERIODS
 
 __all__ = ["FakeNodLaser", "RangeSource", "Waveform", "flat_ground", "NO_RETURN_WORD"]
+
+@functools.cache
+def _beams(variant: tuple[int, int]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Bearings (deg) of a scan variant's beams and where each lies between the first (0)
+    and the last (1); read-only, one pair per variant (sources may cache on them)."""
+    count = next(n for n, v in SCAN_VARIANTS.items() if v == variant)
+    bearings = scan_bearings_deg(count, *variant)
+    fraction = np.arange(count) / max(count - 1, 1)
+    bearings.flags.writeable = False
+    fraction.flags.writeable = False
+    return bearings, fraction
+
 
 #: ``source(t, nod_deg per beam, bearings_deg) -> ranges in metres``.
 RangeSource: TypeAlias = Callable[[float, npt.NDArray[np.float64], npt.NDArray[np.float64]],
@@ -315,11 +328,10 @@ class FakeNodLaser(FakeDevice[HostCommand]):
     def _measure(self, start: float, end: float) -> tuple[tuple[float, float],
                                                           MeasuredValues]:
         """Encoder angles at both ends and the LMS's 0xB0 reply for one scan."""
-        field, resolution = self.variant
-        count = next(n for n, v in SCAN_VARIANTS.items() if v == self.variant)
-        bearings = scan_bearings_deg(count, field, resolution)
+        bearings, fraction = _beams(self.variant)
+        count = bearings.size
         nod_start, nod_end = self.angle_at(start), self.angle_at(end)
-        nod = np.linspace(nod_start, nod_end, count) + self.offset_deg
+        nod = (nod_start + self.offset_deg) + (nod_end - nod_start) * fraction
         ranges = np.asarray(self.source(start, nod, bearings), dtype=np.float64).reshape(-1)
         if ranges.shape != bearings.shape:
             raise ValueError(f"range source returned {ranges.size} values for {count} beams")

@@ -609,7 +609,7 @@ def test_nod_scan_to_points_excludes_no_return_codes() -> None:
 
 
 @settings(max_examples=200)
-@given(st.binary(max_size=800))
+@given(st.binary(max_size=1100))
 def test_the_table_driven_crc_equals_the_manuals_byte_by_byte_routine(data):
     from components.nodding_laser.codec import sick_crc16_reference
 
