@@ -25,7 +25,7 @@ from contextlib import asynccontextmanager
 
 from afa.errors import ETimeOut
 
-__all__ = ["Clock", "WallClock", "VirtualClock", "TimerHandle", "DEFAULT_EPOCH"]
+__all__ = ["Clock", "WallClock", "VirtualClock", "TimerHandle", "Watchdog", "DEFAULT_EPOCH"]
 
 #: 2005-09-17 12:00:00 UTC, the date in the Raptor's geometry file name (050917...).
 DEFAULT_EPOCH = 1126958400.0
@@ -121,6 +121,61 @@ class Clock(ABC):
         finally:
             handle.cancel()
 
+    @asynccontextmanager
+    async def watchdog(self, seconds: float, what: str = "operation") -> AsyncIterator[Watchdog]:
+        """Cancel the body once :meth:`Watchdog.feed` has not been called for ``seconds``
+        of this clock's time, and raise :class:`~afa.errors.ETimeOut`.
+
+        Unlike a :meth:`timeout` around each wait, feeding costs one store: the single
+        timer is moved only when it fires early (input that went stale, such as a device
+        that stopped talking, is noticed within ``seconds`` of the last feed).
+        """
+        if not seconds > 0:
+            raise ValueError(f"seconds must be positive, got {seconds}")
+        task = asyncio.current_task()
+        assert task is not None, "watchdog() needs a running task"
+        dog = Watchdog(self, seconds, task)
+        try:
+            yield dog
+        except asyncio.CancelledError:
+            if dog.fired and task.uncancel() == 0:
+                raise ETimeOut(f"{what}: nothing for {seconds:g} s") from None
+            raise
+        finally:
+            dog.stop()
+
+
+class Watchdog:
+    """The handle :meth:`Clock.watchdog` yields: call :meth:`feed` on every sign of life."""
+
+    __slots__ = ("clock", "seconds", "last", "fired", "_task", "_handle")
+
+    def __init__(self, clock: Clock, seconds: float, task: asyncio.Task[object]) -> None:
+        self.clock = clock
+        self.seconds = seconds
+        self.last = clock.now()
+        self.fired = False
+        self._task = task
+        self._handle: TimerHandle | None = clock.call_at(self.last + seconds, self._check)
+
+    def feed(self) -> None:
+        """A sign of life: the deadline is ``seconds`` from now."""
+        self.last = self.clock.now()
+
+    def stop(self) -> None:
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None
+
+    def _check(self) -> None:
+        due = self.last + self.seconds
+        if self.clock.now() < due:  # fed since the timer was set: wait for the rest
+            self._handle = self.clock.call_at(due, self._check)
+            return
+        self._handle = None
+        self.fired = True
+        self._task.cancel()
+
 
 class WallClock(Clock):
     """Real time: ``time.time()`` for stamps, the loop's monotonic timers for waiting."""
@@ -151,6 +206,7 @@ class VirtualClock(Clock):
         self._timers: list[tuple[float, int, TimerHandle]] = []
         self._order = itertools.count()
         self._settlers: list[asyncio.Future[None]] = []
+        self._driver: _LoopDriver | None = None  # of the loop last used
         self.auto_advance = auto_advance
 
     def now(self) -> float:
@@ -206,7 +262,11 @@ class VirtualClock(Clock):
                 handle.callback()
 
     def _ensure_driver(self) -> None:
-        _LoopDriver.of(asyncio.get_running_loop()).serve(self)
+        loop = asyncio.get_running_loop()
+        driver = self._driver
+        if driver is None or driver.loop is not loop:
+            driver = self._driver = _LoopDriver.of(loop)
+        driver.serve(self)
 
     def _has_work(self) -> bool:
         return bool(self._settlers) or (self.auto_advance and self._next_deadline() is not None)
@@ -231,15 +291,20 @@ class _LoopDriver:
     _instances: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _LoopDriver] = (
         weakref.WeakKeyDictionary())
 
-    def __init__(self) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = weakref.ref(loop)
         self.clocks: list[VirtualClock] = []
         self.task: asyncio.Task[None] | None = None
+
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop | None:
+        return self._loop()
 
     @classmethod
     def of(cls, loop: asyncio.AbstractEventLoop) -> _LoopDriver:
         driver = cls._instances.get(loop)
         if driver is None:
-            driver = cls._instances[loop] = cls()
+            driver = cls._instances[loop] = cls(loop)
         return driver
 
     def serve(self, clock: VirtualClock) -> None:

@@ -16,7 +16,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from afa.clock import Clock
+from afa.clock import Clock, Watchdog
 from afa.codec import StreamDecoder
 from afa.errors import EDevIO, ETimeOut
 from afa.transport import ByteStream
@@ -115,18 +115,22 @@ class Reactor(Generic[M]):
 
     async def _read_loop(self, stream: ByteStream) -> None:
         self._messages_since_connect = 0
-        decoder, deliver, clock = self.decoder, self._on_message, self._clock
+        if self._stale_after is None:
+            await self._pump(stream, None)
+            return
+        try:
+            async with self._clock.watchdog(self._stale_after, f"{self.name} read") as dog:
+                await self._pump(stream, dog)
+        except ETimeOut as exc:
+            raise EDevIO(f"no message for {self._stale_after:g} s") from exc
+
+    async def _pump(self, stream: ByteStream, dog: Watchdog | None) -> None:
+        decoder, deliver, clock, size = self.decoder, self._on_message, self._clock, self._read_size
         while True:
-            if self._stale_after is None:
-                data = await stream.read(self._read_size)
-            else:
-                try:
-                    async with clock.timeout(self._stale_after, f"{self.name} read"):
-                        data = await stream.read(self._read_size)
-                except ETimeOut as exc:
-                    raise EDevIO(f"no data for {self._stale_after:g} s") from exc
-            messages = decoder.feed(data)
+            messages = decoder.feed(await stream.read(size))
             if messages:
+                if dog is not None:  # bytes that decode to nothing (noise) are no sign of life
+                    dog.feed()
                 self.last_message_time = clock.now()
                 self._messages_since_connect += len(messages)
                 for message in messages:

@@ -349,7 +349,7 @@ async def test_a_unit_that_falls_silent_is_reopened_and_restarted():
         fake.continuous = 0  # a brown-out reset the unit: back in polled mode, silent
         await clock.advance(1.05)
         assert not imu.health().healthy
-        assert "no data for 1 s" in imu.health().detail
+        assert "no message for 1 s" in imu.health().detail
         await until(lambda: imu.health().healthy, clock, timeout=5.0)
         await clock.advance(1.0)
         stats = imu.statistics()

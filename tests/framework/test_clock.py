@@ -97,6 +97,42 @@ async def test_outer_cancellation_is_not_turned_into_a_timeout():
         await task
 
 
+async def test_watchdog_fires_a_fixed_time_after_the_last_feed():
+    clock = VirtualClock(start=0.0)
+    fed = []
+    with pytest.raises(ETimeOut) as info:
+        async with clock.watchdog(1.0, "the feed") as dog:
+            for delay in (0.5, 0.9, 0.3):  # each gap shorter than the watchdog's second
+                await clock.sleep(delay)
+                dog.feed()
+                fed.append(clock.now())
+            await clock.sleep(100)
+    assert fed == pytest.approx([0.5, 1.4, 1.7])
+    assert clock.now() == pytest.approx(2.7)  # the last feed plus one second
+    assert "the feed" in str(info.value)
+
+
+async def test_watchdog_leaves_no_timer_and_does_not_swallow_cancellation():
+    clock = VirtualClock(start=0.0)
+    async with clock.watchdog(5.0) as dog:
+        await clock.sleep(1.0)
+        dog.feed()
+    assert clock.pending == 0
+
+    async def body():
+        async with clock.watchdog(10.0):
+            await clock.sleep(100)
+
+    task = asyncio.get_running_loop().create_task(body())
+    await clock.advance(1.0)
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    with pytest.raises(ValueError):
+        async with clock.watchdog(0.0):
+            pass
+
+
 async def test_manual_advance_without_auto_advance():
     clock = VirtualClock(start=0.0, auto_advance=False)
     woke = []

@@ -158,9 +158,39 @@ async def test_a_silent_device_is_stale_and_reopened():
     async with System([counter], clock=clock, devices={"Counter": silent}):
         await clock.advance(1.2)
         assert not counter.health().healthy
-        assert "no data for 1 s" in counter.health().detail
+        assert "no message for 1 s" in counter.health().detail
         await clock.advance(2.0)
     assert len(opened) >= 2
+
+
+async def test_a_device_sending_only_noise_is_stale_and_reopened():
+    """Bytes that never decode (a wrong baud rate looks like this) are no sign of life."""
+    clock = VirtualClock(start=0.0)
+    opened = []
+
+    class Babbler(FakeDevice):
+        async def produce(self, stream):
+            while True:
+                await stream.write(b"\x00garbage\xff")
+                await self.clock.sleep(0.05)
+
+    babbler = Babbler(clock)
+    factory = babbler.factory()
+
+    async def counted(spec):
+        opened.append(spec)
+        return await factory(spec)
+
+    counter = Counter("Counter")
+    async with System([counter], clock=clock, devices={"Counter": counted}):
+        await clock.advance(1.2)
+        assert not counter.health().healthy
+        assert "no message for 1 s" in counter.health().detail
+        await clock.advance(2.0)
+        stats = counter.statistics()
+        await babbler.aclose()
+    assert len(opened) >= 2
+    assert stats["bytes_skipped"] > 0
 
 
 async def test_corrupt_frames_are_counted_in_component_statistics():
