@@ -4,14 +4,17 @@ All rays are cast at once, in two passes:
 
 1. **Coarse**: each ray is cut into segments of ``block * resolution`` metres. A segment
    can only meet the surface if its lowest point is at or below the highest surface
-   sample near it; :meth:`Terrain.block_max` gives a conservative bound (the maximum over
-   the 3 x 3 blocks around the segment's midpoint), so no hit is ever skipped.
-2. **Fine**: the first candidate segment of each ray is sampled every
-   ``resolution / 2`` against the bilinear surface; the first sample below the surface
-   and the one before it bracket the hit, refined by linear interpolation of the height
-   difference (exact on planar ground). Rays whose candidate was a false alarm go round
-   again with their next 2, 4, 8, ... candidates; a hit beyond ``max_range`` ends the
-   ray with NaN.
+   sample under it; :meth:`Terrain.block_max` gives a conservative bound (the maximum
+   over the 2 x 2 blocks from the segment's south-west corner, which a segment one
+   block long cannot leave), so no hit is ever skipped.
+2. **Fine**: the first two candidate segments of each ray are sampled every
+   ``resolution`` against the bilinear surface; the first sample below the surface and
+   the one before it bracket the hit, refined by linear interpolation of the height
+   difference (exact on planar ground). Rays whose candidates were false alarms go round
+   again with their next 4, 8, ... candidates; a hit beyond ``max_range`` ends the ray
+   with NaN. (A descending ray's segment before the hit is usually a candidate too, so
+   two at once finish most scan lines in one round; batches of over 1024 rays, such as
+   depth images, start with one.)
 
 Points off the grid are treated as empty space (a ray leaving the world finds nothing).
 The terrain's vertical obstacle faces are bilinear ramps one grid cell wide, so a face
@@ -78,12 +81,15 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     by, bx = blocks.shape
     bmax = blocks.ravel()
     starts = seg * np.arange(n_seg)
-    mid = starts + 0.5 * seg
     # z is linear along a segment: its lowest point is the start, or the end if falling
-    z_low = (oz + np.minimum(dz, 0.0)[:, None] * seg) + dz[:, None] * starts
-    # block coordinates of segment midpoints, offset into the padded block array
-    bi = (ox - terrain.east0) / seg + BLOCK_PAD + (dx / seg)[:, None] * mid
-    bj = (oy - terrain.north0) / seg + BLOCK_PAD + (dy / seg)[:, None] * mid
+    # (lowered by a micrometre, against rounding differences with the fine pass)
+    z_low = (oz - 1e-6 + np.minimum(dz, 0.0)[:, None] * seg) + dz[:, None] * starts
+    # a segment spans at most one block in each axis (dx blocks east, dy north): the
+    # block of its south-west corner indexes the bound, offset into the padded array
+    bi = (ox - terrain.east0) / seg + BLOCK_PAD + (dx / seg)[:, None] * starts
+    bi += np.minimum(dx, 0.0)[:, None]
+    bj = (oy - terrain.north0) / seg + BLOCK_PAD + (dy / seg)[:, None] * starts
+    bj += np.minimum(dy, 0.0)[:, None]
     np.clip(bi, 0, bx - 1, out=bi)
     np.clip(bj, 0, by - 1, out=bj)
     cell = bj.astype(np.intp)
@@ -106,13 +112,15 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     done = 0
     step = res  # one sample per grid cell; the hit is refined by interpolation
     offsets = step * np.arange(block + 1)
-    take = 3
+    # two at once saves a round of ~60 small array operations; a big batch (a depth
+    # image) is bound by memory instead, where the extra samples cost more than a round
+    take = 2 if n_rays <= 1024 else 1
     while True:
         todo = ~found & (total > done)
         if not todo.any():
             break
         # the next `take` candidate segments of every unfinished ray; most rays hit in
-        # their first, so start with one and double for the stragglers
+        # their first two, so start with two and double for the stragglers
         sel = (rank > done) & (rank <= done + take) & candidate & todo[:, None]
         done += take
         take *= 2

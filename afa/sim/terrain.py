@@ -197,9 +197,10 @@ class Terrain:
         Block (bj, bi) spans samples ``[b*block, (b+1)*block]`` in each axis (one sample
         of overlap, so bilinear interpolation anywhere in the block is bounded by it).
         Element ``[bj + BLOCK_PAD, bi + BLOCK_PAD]`` of the result is the highest sample in
-        blocks bj-1..bj+1 x bi-1..bi+1. The array is padded by ``BLOCK_PAD`` blocks on
-        every side: the inner ring still bounds the edge blocks, the outer ring is -inf,
-        so clipped indices of far-off points find nothing.
+        blocks bj..bj+1 x bi..bi+1: it bounds any segment no longer than a block in either
+        axis whose lowest corner lies in block (bj, bi). The array is padded by
+        ``BLOCK_PAD`` blocks of -inf on every side, so clipped indices of far-off points
+        find nothing.
         """
         cached = self._block_cache.get(block)
         if cached is not None:
@@ -219,11 +220,9 @@ class Terrain:
         blocks[BLOCK_PAD:-BLOCK_PAD, BLOCK_PAD:-BLOCK_PAD] = np.maximum(
             np.maximum(core, edge_r), np.maximum(edge_c, corner))
         out = blocks.copy()
-        ring = np.full((by + 2 * BLOCK_PAD + 2, bx + 2 * BLOCK_PAD + 2), -np.inf, dtype=np.float32)
-        ring[1:-1, 1:-1] = blocks
-        for dj in (0, 1, 2):
-            for di in (0, 1, 2):
-                np.maximum(out, ring[dj:dj + out.shape[0], di:di + out.shape[1]], out=out)
+        np.maximum(out[:, :-1], blocks[:, 1:], out=out[:, :-1])  # and the block east
+        rows = out.copy()
+        np.maximum(out[:-1], rows[1:], out=out[:-1])  # and the two north of those
         out.flags.writeable = False
         self._block_cache[block] = out
         return out

@@ -125,9 +125,12 @@ def test_block_max_bounds_every_bilinear_height() -> None:
     bi = np.floor((e + 15) / block).astype(int) + BLOCK_PAD
     bj = np.floor((n + 15) / block).astype(int) + BLOCK_PAD
     assert np.all(terrain.height(e, n) <= bmax[bj, bi] + 1e-6)
-    # and for points up to half a block away from the block (a segment's reach)
-    for de, dn in [(0.4, 0.4), (-0.4, 0.4), (0.4, -0.4), (-0.4, -0.4)]:
+    # and for points up to a block east and north of them (a segment's reach from its
+    # south-west corner)
+    for de, dn in [(0.8, 0.0), (0.0, 0.8), (0.8, 0.8), (0.3, 0.7)]:
         assert np.all(terrain.height(e + de, n + dn) <= bmax[bj, bi] + 1e-6)
+    # ... which is not a 3 x 3 neighbourhood: the bound is tighter than the maximum
+    assert np.mean(bmax[bj, bi] < terrain.surface.max()) > 0.5
     assert bmax.max() == pytest.approx(terrain.surface.max())
     assert np.isneginf(bmax[0]).all() and np.isneginf(bmax[:, -1]).all()
 
