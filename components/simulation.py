@@ -247,7 +247,8 @@ class RaptorSimulation:
             pose = self._frame("Digiclops:ImagePlane")
             coarse = depth_image(self.terrain, pose[:3, 3], pose[:3, :3], model.width // k,
                                  model.height // k, fov, max_range)
-            return np.repeat(np.repeat(coarse, k, axis=0), k, axis=1)
+            h, w = coarse.shape
+            return np.broadcast_to(coarse[:, None, :, None], (h, k, w, k)).reshape(h * k, w * k)
 
         return render
 

@@ -227,9 +227,11 @@ class _ScanLine:
 
     @cached_property
     def seq(self) -> Range3dSeqEventIDL:
+        points = np.compress(self.valid, self.points, axis=0)
+        points.flags.writeable = False  # a fresh array: the IDL need not copy it again
         return Range3dSeqEventIDL(time=self.time, sensorId=self.sensor_id, frame=self.frame,
                                   nodAngleStart=self.nod_start, nodAngleEnd=self.nod_end,
-                                  points=self.points[self.valid])
+                                  points=points)
 
 
 class NodLaser(PublishServerReactor[ControllerMessage]):

@@ -35,6 +35,7 @@ so a principal point in the middle of a 320x240 image is (159.5, 119.5).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Awaitable, Callable, Sequence
@@ -172,22 +173,28 @@ def disparity_to_points(disparity: NDArray[np.floating], model: CameraModel,
     invalid slot, and the (rows, cols) mask. Raises ValueError if the image's shape is
     not the model's.
     """
-    d = np.asarray(disparity, dtype=np.float64)
+    d = np.asarray(disparity, dtype=np.float32)
     if d.shape != (model.height, model.width):
         raise ValueError(f"disparity image is {d.shape[::-1]} (cols, rows), the camera model "
                          f"says {model.width}x{model.height}")
     with np.errstate(divide="ignore", invalid="ignore"):
-        matched = np.isfinite(d) & (d > 0)
-        z = np.where(matched, model.fb / np.where(matched, d, 1.0), np.nan)
-        valid = matched & (z <= max_depth)
-    u = np.arange(model.width, dtype=np.float64) - model.cx
-    v = np.arange(model.height, dtype=np.float64) - model.cy
-    points = np.empty((model.height, model.width, 3), dtype=np.float64)
-    points[..., 0] = u[np.newaxis, :] * z / model.focal_px
-    points[..., 1] = v[:, np.newaxis] * z / model.focal_px
+        z = np.float32(model.fb) / d  # NaN stays NaN; 0 and negative are rejected below
+        valid = (d > 0) & (z <= max_depth)  # comparisons with NaN are False
+    z[~valid] = np.nan
+    across, down = _pixel_slopes(model)
+    points = np.empty((model.height, model.width, 3), dtype=np.float32)
+    np.multiply(across, z, out=points[..., 0])
+    np.multiply(down, z, out=points[..., 1])
     points[..., 2] = z
-    points[~valid] = np.nan
-    return points.astype(np.float32), valid
+    return points, valid
+
+
+@functools.lru_cache(maxsize=8)
+def _pixel_slopes(model: CameraModel) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """``(u - cx) / f`` as a row and ``(v - cy) / f`` as a column, float32."""
+    across = ((np.arange(model.width) - model.cx) / model.focal_px).astype(np.float32)
+    down = ((np.arange(model.height) - model.cy) / model.focal_px).astype(np.float32)
+    return across[np.newaxis, :], down[:, np.newaxis]
 
 
 def flat_ground(model: CameraModel, height: float = 1.83, pitch_deg: float = 10.0
@@ -274,13 +281,17 @@ class SyntheticBackend:
     def depth_to_disparity(self, depth: NDArray[np.floating]) -> Float32Image:
         """Disparity in pixels for a depth image (m), quantised; NaN where unmatched."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            d = self._model.fb / np.asarray(depth, dtype=np.float64)
+            d = np.float32(self._model.fb) / np.asarray(depth, dtype=np.float32)
         if self.noise_px > 0:
-            d = d + self.rng.normal(0.0, self.noise_px, d.shape)
-        d = np.round(d / self.quantum) * self.quantum
-        bad = ~np.isfinite(d) | (d < self.quantum) | (d > self.max_disparity)
-        d[bad] = np.nan
-        return d.astype(np.float32)
+            d += self.rng.normal(0.0, self.noise_px, d.shape).astype(np.float32)
+        step = np.float32(self.quantum)
+        with np.errstate(invalid="ignore"):
+            np.divide(d, step, out=d)
+            np.round(d, out=d)
+            np.multiply(d, step, out=d)
+            matched = (d >= step) & (d <= self.max_disparity)  # False for NaN and inf
+        d[~matched] = np.nan
+        return d
 
     def close(self) -> None:
         self.is_open = False
