@@ -29,6 +29,7 @@ docs/geometry.md.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -200,10 +201,12 @@ def laser_scan(terrain: Terrain, origin: ArrayLike, rotation: ArrayLike, bearing
                      laser_directions(rotation, bearings), max_range, block=block)
 
 
+@functools.lru_cache(maxsize=16)
 def camera_directions(width: int, height: int, fov: float) -> FloatArray:
     """(height, width, 3) unit ray directions of a pinhole camera in its optical frame
     (z forward, x right, y down) through pixel centres; ``fov`` is the horizontal field
-    of view in degrees, square pixels, principal point at the image centre."""
+    of view in degrees, square pixels, principal point at the image centre. Read-only
+    and cached: a camera renders every frame through the same rays."""
     if width < 1 or height < 1 or not 0 < fov < 180:
         raise ValueError("width and height must be >= 1 and 0 < fov < 180 degrees")
     f = 0.5 * width / math.tan(math.radians(fov) / 2)
@@ -212,6 +215,7 @@ def camera_directions(width: int, height: int, fov: float) -> FloatArray:
     gu, gv = np.meshgrid(u, v)
     rays = np.stack([gu, gv, np.ones_like(gu)], axis=-1)
     result: FloatArray = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+    result.flags.writeable = False
     return result
 
 

@@ -361,8 +361,13 @@ class Vehicle:
         # Least-squares plane through the four contacts of a rectangle: average the
         # pairs. Height: wheel radius above the mean rear contact.
         p = self.parameters
-        contacts = self.wheel_contacts(east, north, yaw)
-        z = terrain.height(contacts[:, 0], contacts[:, 1])
+        c, s = math.cos(yaw), math.sin(yaw)
+        half = 0.5 * p.track
+        le, ln = -half * s, half * c  # half the track to the left
+        fe, fn = p.wheelbase * c, p.wheelbase * s
+        height = terrain.height_at  # the four points of wheel_contacts(), without numpy
+        z = (height(east + le, north + ln), height(east - le, north - ln),
+             height(east + fe + le, north + fn + ln), height(east + fe - le, north + fn - ln))
         rear, front = 0.5 * (z[0] + z[1]), 0.5 * (z[2] + z[3])
         left, right = 0.5 * (z[0] + z[2]), 0.5 * (z[1] + z[3])
         pitch = math.atan2(rear - front, p.wheelbase)

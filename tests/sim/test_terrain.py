@@ -135,6 +135,19 @@ def test_block_max_bounds_every_bilinear_height() -> None:
     assert np.isneginf(bmax[0]).all() and np.isneginf(bmax[:, -1]).all()
 
 
+def test_height_at_one_point_agrees_with_the_vectorised_lookup() -> None:
+    spec = TerrainSpec(width=30, depth=20, resolution=0.1, roughness=0.1, seed=5,
+                       slope_east=0.02)
+    terrain = Terrain.from_spec(spec, [Obstacle("box", east=2, north=1, length=2, width=1,
+                                                height=0.5, heading=30)])
+    rng = np.random.default_rng(1)
+    east = rng.uniform(-18, 18, 300)  # some off the grid: both clamp to its edge
+    north = rng.uniform(-12, 12, 300)
+    expected = terrain.height(east, north)
+    got = [terrain.height_at(e, n) for e, n in zip(east, north, strict=True)]
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
+
+
 def test_grids_are_read_only() -> None:
     terrain = Terrain.from_spec(SLOPE)
     with pytest.raises(ValueError):
