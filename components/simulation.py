@@ -230,8 +230,8 @@ class RaptorSimulation:
             np.multiply(sin_b, np.cos(n), out=local[:, 0])
             local[:, 1] = minus_cos_b
             np.multiply(sin_b, np.sin(n), out=local[:, 2])
-            ranges = cast_rays(self.terrain, pose[:3, 3], local @ pose[:3, :3].T, max_range)
-            return np.where(np.isnan(ranges), np.inf, ranges)
+            # NaN (nothing within range) is a no-return for the fake, as inf would be
+            return cast_rays(self.terrain, pose[:3, 3], local @ pose[:3, :3].T, max_range)
 
         return source
 

@@ -62,20 +62,27 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
         raise ValueError(f"origins must have shape (3,) or {d.shape}, got {o.shape}")
     if not (math.isfinite(max_range) and max_range > 0):
         raise ValueError("max_range must be finite and > 0")
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
-    if not (length > 0).all():
-        raise ValueError("directions must be non-zero")
     n_rays = d.shape[0]
     ranges = np.full(n_rays, np.nan)
     if n_rays == 0:
         return ranges
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    if not length.min() > 0:  # also False for NaN
+        raise ValueError("directions must be non-zero")
     dx, dy, dz = (d / length[:, None]).T
-    # per-ray origins as (N, 1) columns, a shared one as scalars (broadcast either way)
-    ox, oy, oz = (o.tolist() if shared else (o[:, 0:1], o[:, 1:2], o[:, 2:3]))
+    # a shared origin as scalars, per-ray origins as (N,) vectors (broadcast either way)
+    ox, oy, oz = o.tolist() if shared else o.T
 
     res = terrain.resolution
     seg = block * res
     n_seg = int(math.ceil(max_range / seg))
+
+    # Rays from one origin that cannot leave the grid need no clamping (the usual case)
+    gx = (ox - terrain.east0) / res + 1.0  # padded-surface grid units (see below)
+    gy = (oy - terrain.north0) / res + 1.0
+    x_max, y_max = terrain.nx + 1.0 - 1e-9, terrain.ny + 1.0 - 1e-9
+    reach = n_seg * block + 1.0  # grid steps to the last sample of the last segment
+    clamp = not (shared and reach <= gx <= x_max - reach and reach <= gy <= y_max - reach)
 
     # ---- coarse pass: which segments could touch the surface
     blocks = terrain.block_max(block)
@@ -84,31 +91,27 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     starts = seg * np.arange(n_seg)
     # z is linear along a segment: its lowest point is the start, or the end if falling
     # (lowered by a micrometre, against rounding differences with the fine pass)
-    z_low = (oz - 1e-6 + np.minimum(dz, 0.0)[:, None] * seg) + dz[:, None] * starts
+    z_low = (oz - 1e-6 + np.minimum(dz, 0.0) * seg)[:, None] + dz[:, None] * starts
     # a segment spans at most one block in each axis (dx blocks east, dy north): the
     # block of its south-west corner indexes the bound, offset into the padded array
-    bi = (ox - terrain.east0) / seg + BLOCK_PAD + (dx / seg)[:, None] * starts
-    bi += np.minimum(dx, 0.0)[:, None]
-    bj = (oy - terrain.north0) / seg + BLOCK_PAD + (dy / seg)[:, None] * starts
-    bj += np.minimum(dy, 0.0)[:, None]
-    np.clip(bi, 0, bx - 1, out=bi)
-    np.clip(bj, 0, by - 1, out=bj)
+    bi = ((ox - terrain.east0) / seg + BLOCK_PAD + np.minimum(dx, 0.0))[:, None] \
+        + (dx / seg)[:, None] * starts
+    bj = ((oy - terrain.north0) / seg + BLOCK_PAD + np.minimum(dy, 0.0))[:, None] \
+        + (dy / seg)[:, None] * starts
+    if clamp:  # (ufuncs rather than np.clip: its Python wrapper costs more than the work)
+        np.minimum(np.maximum(bi, 0, out=bi), bx - 1, out=bi)
+        np.minimum(np.maximum(bj, 0, out=bj), by - 1, out=bj)
     cell = bj.astype(np.intp)
     cell *= bx
     cell += bi.astype(np.intp)
     candidate = z_low <= bmax.take(cell)
-    rank = np.cumsum(candidate, axis=1, dtype=np.int32)
+    rank = candidate.cumsum(axis=1, dtype=np.int32)
     total = rank[:, -1]
 
     # ---- fine passes, in grid units of the padded surface (off-grid points need no mask)
     padded = terrain.padded_surface()
     surface, width = padded.ravel(), padded.shape[1]
-    gx = (ox - terrain.east0) / res + 1.0
-    gy = (oy - terrain.north0) / res + 1.0
     gdx, gdy = dx / res, dy / res
-    x_max, y_max = terrain.nx + 1.0 - 1e-9, terrain.ny + 1.0 - 1e-9
-    reach = n_seg * block + 1.0  # grid steps to the last sample of the last segment
-    clamp = not (shared and reach <= gx <= x_max - reach and reach <= gy <= y_max - reach)
     found = np.zeros(n_rays, dtype=bool)
     done = 0
     step = res  # one sample per grid cell; the hit is refined by interpolation
@@ -118,19 +121,19 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     take = 2 if n_rays <= 1024 else 1
     while True:
         todo = ~found & (total > done)
-        if not todo.any():
+        if not np.count_nonzero(todo):
             break
         # the next `take` candidate segments of every unfinished ray; most rays hit in
         # their first two, so start with two and double for the stragglers
         sel = (rank > done) & (rank <= done + take) & candidate & todo[:, None]
         done += take
         take *= 2
-        ray, segment = np.nonzero(sel)
+        ray, segment = sel.nonzero()
         t = (segment * seg)[:, None] + offsets
         if shared:
             x0, y0, z0 = gx, gy, oz
         else:
-            x0, y0, z0 = gx[ray], gy[ray], oz[ray]
+            x0, y0, z0 = gx[ray, None], gy[ray, None], oz[ray, None]
         fx = x0 + gdx[ray, None] * t
         fy = y0 + gdy[ray, None] * t
         dist = (z0 + dz[ray, None] * t) - _bilinear(surface, width, fx, fy, x_max, y_max, clamp)
@@ -138,7 +141,7 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
         first = below.argmax(axis=1)
         rows = np.arange(len(ray))
         has = below[rows, first]
-        if not has.any():
+        if not np.count_nonzero(has):
             continue
         rows, first = rows[has], first[has]
         # rows are ordered by ray then segment: the first row of each ray is its nearest hit
@@ -149,7 +152,7 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
         t_hit = t[rows, first]
         # the sample before the first one below is above (dist > 0): interpolate between
         refine = first > 0
-        if refine.any():
+        if np.count_nonzero(refine):
             r, p = rows[refine], first[refine] - 1
             above = dist[r, p]
             t_hit[refine] = t[r, p] + above / (above - dist[r, p + 1]) * step
@@ -163,8 +166,8 @@ def _bilinear(flat: NDArray[np.float32], width: int, fx: FloatArray, fy: FloatAr
     """Bilinear height at padded-grid coordinates ``fx``, ``fy`` (overwritten), clamped
     onto the grid and its border unless the caller knows they are well inside."""
     if clamp:
-        np.clip(fx, 0.0, x_max, out=fx)
-        np.clip(fy, 0.0, y_max, out=fy)
+        np.minimum(np.maximum(fx, 0.0, out=fx), x_max, out=fx)
+        np.minimum(np.maximum(fy, 0.0, out=fy), y_max, out=fy)
     i = fx.astype(np.intp)
     j = fy.astype(np.intp)
     tx = fx - i

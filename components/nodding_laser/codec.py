@@ -1086,16 +1086,16 @@ class ScanLineGeometry:
         bearings = np.deg2rad(np.asarray(bearings_deg, dtype=np.float64).reshape(-1))
         self.count = bearings.size
         self._sin = np.sin(bearings)
-        self._cos = np.cos(bearings)
+        self._minus_cos = -np.cos(bearings)
         # where each beam lies between the first (0) and the last (1)
         self._fraction = (np.arange(self.count) / (self.count - 1) if self.count > 1
                           else np.zeros(self.count))
 
-    def points(self, ranges_m: npt.ArrayLike,
-               nod_deg: float | tuple[float, float]) -> npt.NDArray[np.float64]:
-        """(count, 3) points of every beam, whatever its range (filter them yourself).
-
-        Raises :class:`~afa.errors.EOutOfBounds` if there are not ``count`` ranges.
+    def points(self, ranges_m: npt.ArrayLike, nod_deg: float | tuple[float, float], *,
+               dtype: npt.DTypeLike = np.float64) -> npt.NDArray[np.floating]:
+        """(count, 3) points of every beam, whatever its range (filter them yourself; a
+        NaN range gives a NaN point). Raises :class:`~afa.errors.EOutOfBounds` if there
+        are not ``count`` ranges.
         """
         r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
         if r.size != self.count:
@@ -1104,11 +1104,10 @@ class ScanLineGeometry:
         start = math.radians(start)
         nod = start + (math.radians(end) - start) * self._fraction
         forward = r * self._sin
-        out = np.empty((self.count, 3))
-        np.multiply(forward, np.cos(nod), out=out[:, 0])
-        np.multiply(r, self._cos, out=out[:, 1])
-        np.negative(out[:, 1], out=out[:, 1])
-        np.multiply(forward, np.sin(nod), out=out[:, 2])
+        out = np.empty((self.count, 3), dtype=dtype)
+        np.multiply(forward, np.cos(nod), out=out[:, 0], casting="same_kind")
+        np.multiply(r, self._minus_cos, out=out[:, 1], casting="same_kind")
+        np.multiply(forward, np.sin(nod), out=out[:, 2], casting="same_kind")
         return out
 
 

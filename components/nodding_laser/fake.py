@@ -337,9 +337,8 @@ class FakeNodLaser(FakeDevice[HostCommand]):
             raise ValueError(f"range source returned {ranges.size} values for {count} beams")
         if self.noise_m > 0:
             ranges = ranges + self.rng.normal(0.0, self.noise_m, ranges.shape)
-        with np.errstate(invalid="ignore"):
-            counts = np.where(np.isfinite(ranges), np.round(ranges * 1000.0), -1.0)
-            good = (counts >= 1) & (counts < _MAX_COUNT)
+        counts = np.round(ranges * 1000.0)
+        good = (counts >= 1) & (counts < _MAX_COUNT)  # False for NaN and inf
         words = np.where(good, counts, NO_RETURN_WORD).astype(np.int64)
         raw = tuple(words.tolist())
         return (nod_start, nod_end), MeasuredValues(raw, RangeUnit.MM, 0x10, 0, _RANGE_BITS)
