@@ -19,6 +19,7 @@ in rad/s, temperature in degrees Celsius, timer in ticks (``timer_seconds`` give
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Final, TypeAlias
@@ -172,18 +173,15 @@ def checksum(data: bytes | bytearray | memoryview) -> int:
     """
     if len(data) % 2 == 0:
         raise ValueError(f"3DM-GX1 frame body must be header + whole words, got {len(data)} bytes")
-    total = data[0]
-    for i in range(1, len(data), 2):
-        total += (data[i] << 8) | data[i + 1]
-    return total & 0xFFFF
+    words = struct.unpack_from(f">{len(data) // 2}H", data, 1)
+    return (data[0] + sum(words)) & 0xFFFF
 
 
 def _frame(header: int, words: Iterable[int]) -> bytes:
     """Header byte, each word as big-endian 16 bits (two's complement), checksum."""
-    body = bytearray([header])
-    for word in words:
-        body += (word & 0xFFFF).to_bytes(2, "big")
-    return bytes(body + checksum(body).to_bytes(2, "big"))
+    unsigned = [word & 0xFFFF for word in words]
+    total = (header + sum(unsigned)) & 0xFFFF
+    return struct.pack(f">B{len(unsigned) + 1}H", header, *unsigned, total)
 
 
 def _int16(frame: bytes, offset: int) -> int:
@@ -514,7 +512,7 @@ class ImuDecoder(StreamDecoder[ImuReply]):
     def _decode(self, frame: bytes) -> ImuReply:
         header = frame[0]
         if header == CMD_GYRO_STAB_EULER_ACCEL_RATE:
-            counts = tuple(_int16(frame, 1 + 2 * i) for i in range(9))
+            counts = struct.unpack_from(">9h", frame, 1)
             g = self.gains.g_per_count * STANDARD_GRAVITY
             w = self.gains.rad_per_second_per_count
             return EulerAccelRate(
