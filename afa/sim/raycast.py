@@ -120,15 +120,20 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     # image) is bound by memory instead, where the extra samples cost more than a round
     take = 2 if n_rays <= 1024 else 1
     while True:
-        todo = ~found & (total > done)
-        if not np.count_nonzero(todo):
-            break
         # the next `take` candidate segments of every unfinished ray; most rays hit in
         # their first two, so start with two and double for the stragglers
-        sel = (rank > done) & (rank <= done + take) & candidate & todo[:, None]
+        if done == 0:
+            sel = candidate & (rank <= take)
+        else:
+            todo = ~found & (total > done)
+            if not np.count_nonzero(todo):
+                break
+            sel = (rank > done) & (rank <= done + take) & candidate & todo[:, None]
         done += take
         take *= 2
         ray, segment = sel.nonzero()
+        if not len(ray):
+            break
         t = (segment * seg)[:, None] + offsets
         if shared:
             x0, y0, z0 = gx, gy, oz

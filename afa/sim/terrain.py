@@ -66,6 +66,7 @@ class Terrain:
             array.flags.writeable = False
         self._block_cache: dict[int, NDArray[np.float32]] = {}
         self._padded: NDArray[np.float32] | None = None
+        self._circles: NDArray[np.float64] | None = None  # east, north, bounding radius
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -192,6 +193,17 @@ class Terrain:
         z10 = grid[j + 1, i]
         z11 = grid[j + 1, i + 1]
         return (z00 * (1 - tx) + z01 * tx) * (1 - ty) + (z10 * (1 - tx) + z11 * tx) * ty
+
+    def near_obstacle(self, east: float, north: float, margin: float) -> bool:
+        """Whether (east, north) lies within ``margin`` metres of any obstacle's bounding
+        circle (a cheap test before looking at the grid)."""
+        if self._circles is None:
+            self._circles = np.array([(o.east, o.north, o.bounding_radius())
+                                      for o in self.obstacles], dtype=np.float64).reshape(-1, 3)
+        c = self._circles
+        if not len(c):
+            return False
+        return bool((np.hypot(c[:, 0] - east, c[:, 1] - north) <= c[:, 2] + margin).any())
 
     def padded_surface(self) -> NDArray[np.float32]:
         """The surface inside a one-sample border at :data:`OFF_GRID_HEIGHT` (cached):

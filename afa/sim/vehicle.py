@@ -30,7 +30,6 @@ and stops the vehicle; it stays stopped until :meth:`Vehicle.reset`.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -38,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from afa.sim.terrain import Terrain
-from afa.sim.world import Obstacle, World
+from afa.sim.world import World
 
 __all__ = ["VehicleParameters", "VehicleState", "Vehicle", "Collision", "CollisionKind",
            "DriveResult", "run_drive", "GRAVITY"]
@@ -395,18 +394,17 @@ class Vehicle:
         p = self.parameters
         s = self._state
         c, sn = math.cos(s.yaw), math.sin(s.yaw)
-        corners = np.array([[-p.rear_overhang, -p.body_width / 2],
-                            [-p.rear_overhang, p.body_width / 2],
-                            [p.body_length - p.rear_overhang, -p.body_width / 2],
-                            [p.body_length - p.rear_overhang, p.body_width / 2]])
-        ce = s.east + corners[:, 0] * c - corners[:, 1] * sn
-        cn = s.north + corners[:, 0] * sn + corners[:, 1] * c
-        outside = ~terrain.contains(ce, cn)
-        if outside.any():
-            k = int(np.argmax(outside))
-            return Collision(s.time, float(ce[k]), float(cn[k]), -1, "boundary")
-        if not _near_any(terrain.obstacles, s.east, s.north,
-                         p.body_length + p.body_width + terrain.resolution):
+        e0, e1, n0, n1 = terrain.extent
+        back, front, half = -p.rear_overhang, p.body_length - p.rear_overhang, p.body_width / 2
+        for x, y in ((back, -half), (back, half), (front, -half), (front, half)):
+            e, n = s.east + x * c - y * sn, s.north + x * sn + y * c
+            if not (e0 <= e <= e1 and n0 <= n <= n1):
+                return Collision(s.time, e, n, -1, "boundary")
+        # the footprint's circumscribed circle, around the footprint's centre
+        ahead = 0.5 * p.body_length - p.rear_overhang
+        if not terrain.near_obstacle(s.east + ahead * c, s.north + ahead * sn,
+                                     0.5 * math.hypot(p.body_length, p.body_width)
+                                     + terrain.resolution):
             return None
         contacts = self.wheel_contacts()
         relief = np.asarray(terrain.relief(contacts[:, 0], contacts[:, 1]))
@@ -438,11 +436,6 @@ def _sinc(x: float) -> float:
 
 def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2 * math.pi) - math.pi
-
-
-def _near_any(obstacles: Sequence[Obstacle], east: float, north: float, margin: float) -> bool:
-    return any(math.hypot(o.east - east, o.north - north) <= o.bounding_radius() + margin
-               for o in obstacles)
 
 
 def run_drive(world: World, terrain: Terrain | None = None, *, dt: float = 0.05,
