@@ -381,7 +381,7 @@ class RaptorSimulation:
     def _observe(self, event: Event) -> None:
         digest = self._digest
         digest.update(f"{event.type}|{event.time:.6f}|".encode())
-        digest.update(event.body.to_json())
+        digest.update(event.body.fingerprint())  # arrays by their SHA-256
         if isinstance(event.body, PoseTransformIDL) and event.type == "Pose":
             self._pose_error(event.body)
 

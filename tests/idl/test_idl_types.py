@@ -4,6 +4,7 @@ carry exactly the seed's method names."""
 from __future__ import annotations
 
 import base64
+import hashlib
 import json
 import math
 from collections.abc import Callable
@@ -210,6 +211,24 @@ def test_array_bytes_are_little_endian_base64_as_computed_by_hand():
     # 1.0f = 00 00 80 3F, 2.0f = 00 00 00 40, -2.0f = 00 00 00 C0
     assert data == {"dtype": "<f4", "shape": [1, 3], "data": "AACAPwAAAEAAAADA"}
     assert base64.b64decode(data["data"]) == bytes.fromhex("0000803f00000040000000c0")
+
+
+def test_fingerprint_digests_array_bytes_and_tells_values_apart():
+    points = np.array([[1.0, 2.0, -2.0], [0.5, 0.25, 4.0]], dtype=np.float32)
+    seq = Range3dArrayEventIDL(time=T0, sensorId=1, frame="Digiclops:ImagePlane", points=points)
+    data = json.loads(seq.fingerprint())["points"]
+    # the SHA-256 of the little-endian bytes, computed independently of the serialiser
+    assert data == {"dtype": "<f4", "shape": [2, 3],
+                    "sha256": hashlib.sha256(points.astype("<f4").tobytes()).hexdigest()}
+    same = Range3dArrayEventIDL(time=T0, sensorId=1, frame="Digiclops:ImagePlane",
+                                points=points.copy())
+    assert same.fingerprint() == seq.fingerprint()
+    nudged = points.copy()
+    nudged[1, 2] = np.nextafter(nudged[1, 2], np.float32(5))  # one ulp on one element
+    other = Range3dArrayEventIDL(time=T0, sensorId=1, frame="Digiclops:ImagePlane",
+                                 points=nudged)
+    assert other.fingerprint() != seq.fingerprint()
+    assert json.loads(seq.to_json())["points"]["data"]  # to_json is unchanged
 
 
 def test_time_json_is_the_miro_struct():
