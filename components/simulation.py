@@ -108,6 +108,7 @@ class RaptorSimulation:
         self._pose_errors: list[tuple[float, float]] = []
         self.fakes: list[Any] = []
         self._mounts: dict[str, np.ndarray] = {}
+        self._imu_cache: tuple[VehicleState, ImuTruth] | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._system: System | None = None
         self._mpc555: FakeMpc555 | None = None
@@ -190,13 +191,18 @@ class RaptorSimulation:
 
     def _imu_truth(self, t: float) -> ImuTruth:
         state = self.state
+        cached = self._imu_cache
+        if cached is not None and cached[0] is state:  # the IMU samples 2x per physics step
+            return cached[1]
         mount = self._mount("Imu:SensorCenter")[:3, :3]
         to_sensor = mount.T  # sensor-from-vehicle
         # The 3DM-GX1's angles are NED-style (x forward, y right, z down).
         yaw = math.remainder(math.pi / 2 - state.yaw, 2 * math.pi)
-        return ImuTruth(roll=state.roll, pitch=-state.pitch, yaw=yaw,
-                        accel=tuple(to_sensor @ state.specific_force_body()),
-                        rates=tuple(to_sensor @ state.angular_velocity_body()))
+        truth = ImuTruth(roll=state.roll, pitch=-state.pitch, yaw=yaw,
+                         accel=tuple((to_sensor @ state.specific_force_body()).tolist()),
+                         rates=tuple((to_sensor @ state.angular_velocity_body()).tolist()))
+        self._imu_cache = (state, truth)
+        return truth
 
     def _plant(self, t: float, command: DriveCommand) -> WheelTruth:
         """The MPC555's view of the vehicle: its commands become the physics loop's

@@ -278,7 +278,8 @@ class Vehicle:
             self._substep(h, v_cmd, d_cmd, terrain)
             if self._collision is not None:
                 break
-        self._state = replace(self._state, time=end)  # no drift from summing sub-steps
+        if self._state.time != end:  # no drift from summing sub-steps
+            self._state = replace(self._state, time=end)
         return self._state
 
     def _substep(self, h: float, v_cmd: float, d_cmd: float, terrain: Terrain | None) -> None:

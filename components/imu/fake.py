@@ -203,16 +203,14 @@ class FakeImu(FakeDevice[ImuCommand]):
             rates = tuple(r + b for r, b in zip(truth.rates, bias, strict=True))
             return ImuTruth(truth.roll, truth.pitch, truth.yaw, truth.accel,
                             rates, truth.temperature)  # type: ignore[arg-type]
-        n, rng = self.noise, self.rng
-        angles = rng.normal(0.0, n.angle, 3)
-        accel = rng.normal(0.0, n.accel, 3)
-        rate = rng.normal(0.0, n.rate, 3)
-        return ImuTruth(
-            truth.roll + float(angles[0]), truth.pitch + float(angles[1]),
-            truth.yaw + float(angles[2]),
-            tuple(a + float(e) for a, e in zip(truth.accel, accel, strict=True)),  # type: ignore[arg-type]
-            tuple(r + b + float(e) for r, b, e in zip(truth.rates, bias, rate, strict=True)),  # type: ignore[arg-type]
-            truth.temperature)
+        n = self.noise
+        # one draw for all nine: angles, accelerations, rates (a standard normal scaled)
+        e = (self.rng.standard_normal(9) * (n.angle, n.angle, n.angle, n.accel, n.accel,
+                                            n.accel, n.rate, n.rate, n.rate)).tolist()
+        (ax, ay, az), (rx, ry, rz), (bx, by, bz) = truth.accel, truth.rates, bias
+        return ImuTruth(truth.roll + e[0], truth.pitch + e[1], truth.yaw + e[2],
+                        (ax + e[3], ay + e[4], az + e[5]),
+                        (rx + bx + e[6], ry + by + e[7], rz + bz + e[8]), truth.temperature)
 
     def reply(self, command: int) -> bytes:
         """The unit's reply to the single-byte ``command`` now.
