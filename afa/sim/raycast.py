@@ -131,7 +131,7 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
             sel = (rank > done) & (rank <= done + take) & candidate & todo[:, None]
         done += take
         take *= 2
-        ray, segment = sel.nonzero()
+        ray, segment = np.divmod(np.flatnonzero(sel), n_seg)  # faster than 2-D nonzero
         if not len(ray):
             break
         t = (segment * seg)[:, None] + offsets
