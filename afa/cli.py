@@ -71,14 +71,16 @@ def _parser() -> argparse.ArgumentParser:
     check.set_defaults(handler=_config_check)
     show = config_commands.add_parser("show", help="print every effective parameter value")
     show.add_argument("config", type=Path)
-    show.add_argument("--json", action="store_true", help="as {section: {instance: {parameter: value}}}")
+    show.add_argument("--json", action="store_true",
+                      help="as {section: {instance: {parameter: value}}}")
     show.set_defaults(handler=_config_show)
-    defaults = config_commands.add_parser("defaults", help="write a file of every component's defaults")
+    defaults = config_commands.add_parser("defaults",
+                                          help="write a file of every component's defaults")
     defaults.add_argument("-o", "--output", type=Path, help="file to write (default: stdout)")
     defaults.set_defaults(handler=_config_defaults)
 
-    reference = config_commands.add_parser("reference",
-                                           help="print the parameter reference (docs/parameters.md)")
+    reference = config_commands.add_parser(
+        "reference", help="print the parameter reference (docs/parameters.md)")
     reference.set_defaults(handler=_config_reference)
 
     decode = commands.add_parser("decode", help="decode a raw device capture to JSON lines")

@@ -14,13 +14,13 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass
-from enum import Enum
+from enum import StrEnum
 from typing import Generic, TypeVar
 
 M = TypeVar("M")
 
 
-class Fault(str, Enum):
+class Fault(StrEnum):
     """Why bytes at the front of the buffer were skipped."""
 
     GARBAGE = "garbage"  # bytes that cannot start a frame (before a sync pattern)

@@ -30,7 +30,7 @@ import asyncio
 import logging
 from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, ClassVar, Generic, TypeVar
 
@@ -50,12 +50,12 @@ __all__ = [
     "Client", "RestartPolicy", "Health",
 ]
 
-I = TypeVar("I", bound=Interface)
+InterfaceT = TypeVar("InterfaceT", bound=Interface)
 M = TypeVar("M")
 P = TypeVar("P", bound=Parameters)
 
 
-class State(str, Enum):
+class State(StrEnum):
     CREATED = "created"
     STARTING = "starting"
     RUNNING = "running"
@@ -204,8 +204,9 @@ class Component:
         self.context.registry.rebind(full, servant, owner=self)
         return full
 
-    async def resolve(self, interface: type[I], name: str, *, timeout: float | None = None,
-                      call_timeout: float | None = None) -> I:
+    async def resolve(self, interface: type[InterfaceT], name: str, *,
+                      timeout: float | None = None,
+                      call_timeout: float | None = None) -> InterfaceT:
         """Wait until ``name`` is bound (``timeout`` None: forever) and return a proxy."""
         full = join_name(self.robot, name)
         servant = await self.context.registry.wait_resolve(full, timeout)
@@ -215,7 +216,8 @@ class Component:
         """A latest-value slot on this component's clock (for get/getWait polls)."""
         return LatestSlot(self.clock, f"{what} from {self.name}")
 
-    def spawn(self, coroutine: Coroutine[Any, Any, Any], name: str | None = None) -> asyncio.Task[Any]:
+    def spawn(self, coroutine: Coroutine[Any, Any, Any],
+              name: str | None = None) -> asyncio.Task[Any]:
         """Run ``coroutine`` as part of this component (failing with it)."""
         if self._tasks is None:
             coroutine.close()

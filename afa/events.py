@@ -23,7 +23,7 @@ import json
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 from fnmatch import fnmatchcase
 from typing import Any, NamedTuple
 
@@ -31,7 +31,8 @@ from afa.clock import Clock, WallClock
 from afa.errors import ChannelClosed
 from idl._base import IDLModel, idl_types
 
-__all__ = ["Event", "EventChannel", "Subscription", "Publisher", "Overflow", "SubscriptionStatistics"]
+__all__ = ["Event", "EventChannel", "Subscription", "Publisher", "Overflow",
+           "SubscriptionStatistics"]
 
 
 class Event(NamedTuple):
@@ -64,7 +65,7 @@ class Event(NamedTuple):
                    body_cls.model_validate(raw["body"]))
 
 
-class Overflow(str, Enum):
+class Overflow(StrEnum):
     """What a full subscription buffer does with a new event."""
 
     DROP_OLDEST = "drop-oldest"  # keep the newest: sensor data, maps, poses
@@ -305,7 +306,8 @@ class EventChannel:
         key = (domain, type)
         found = self._cache.get(key)
         if found is None:
-            found = self._cache[key] = tuple(s for s in self._subscriptions if s.matches(domain, type))
+            found = self._cache[key] = tuple(s for s in self._subscriptions
+                                             if s.matches(domain, type))
         return found
 
     def _remove(self, subscription: Subscription) -> None:

@@ -30,7 +30,7 @@ from idl._base import Interface, MethodSpec
 __all__ = ["LatestSlot", "Servant", "Proxy", "proxy_for"]
 
 T = TypeVar("T")
-I = TypeVar("I", bound=Interface)
+InterfaceT = TypeVar("InterfaceT", bound=Interface)
 
 
 class LatestSlot(Generic[T]):
@@ -173,8 +173,8 @@ def _proxy_class(interface: type[Interface]) -> type[Proxy]:
     return type(f"{interface.__name__}Proxy", (Proxy,), namespace)
 
 
-def proxy_for(interface: type[I], servant: Servant, clock: Clock, *,
-              timeout: float | None = None, name: str = "") -> I:
+def proxy_for(interface: type[InterfaceT], servant: Servant, clock: Clock, *,
+              timeout: float | None = None, name: str = "") -> InterfaceT:
     """A client proxy exposing exactly ``interface``'s methods, calling ``servant``.
 
     ``timeout`` defaults to the interface's ``call_timeout``. Raises InterfaceError if

@@ -32,7 +32,7 @@ from idl._base import Interface
 
 __all__ = ["System"]
 
-I = TypeVar("I", bound=Interface)
+InterfaceT = TypeVar("InterfaceT", bound=Interface)
 log = logging.getLogger("afa.system")
 
 
@@ -176,8 +176,9 @@ class System:
         await self.start_component(name)
 
     # -- polling from outside (notebooks, tools, tests) --------------------------------
-    async def resolve(self, interface: type[I], name: str, *, timeout: float | None = None,
-                      call_timeout: float | None = None) -> I:
+    async def resolve(self, interface: type[InterfaceT], name: str, *,
+                      timeout: float | None = None,
+                      call_timeout: float | None = None) -> InterfaceT:
         """A client proxy for ``<Robot>/<name>`` (waits up to ``timeout`` for the bind)."""
         full = join_name(self.robot, name)
         servant = await self.registry.wait_resolve(full, timeout)

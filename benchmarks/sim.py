@@ -5,7 +5,7 @@ Prints the real-time factor of the whole stack of ``configs/raptor.xml`` under `
 drivers decoding them, ModelServer) and the cost of the ray casting behind one laser scan
 line and one stereo frame. Target (issue 5): the whole sensing stack at >= 20x real time.
 
-Usage: ``python benchmarks/sim.py [--duration S] [--world FILE] [--json]``
+Usage: ``python benchmarks/sim.py [--duration S] [--world FILE] [--repeat N] [--json]``
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import logging
 import math
 import statistics
 import sys
@@ -27,6 +28,9 @@ sys.path.insert(0, str(ROOT))
 from afa import System, VirtualClock  # noqa: E402
 from afa.sim.raycast import cast_rays, depth_image  # noqa: E402
 from components.simulation import STEREO_SUBSAMPLE, RaptorSimulation  # noqa: E402
+
+#: Issue 5's target for the whole sensing stack under --fast.
+TARGET = 20.0
 
 
 async def whole_stack(world: Path, duration: float) -> dict[str, float]:
@@ -79,17 +83,25 @@ def ray_casting(world: Path, repeat: int = 50) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=60.0)
-    parser.add_argument("--world", type=Path, default=ROOT / "configs" / "worlds" / "open-field.xml")
+    parser.add_argument("--world", type=Path,
+                        default=ROOT / "configs" / "worlds" / "open-field.xml")
+    parser.add_argument("--repeat", type=int, default=3,
+                        help="whole-stack runs; the median is reported (default 3)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    results = {"whole_stack": asyncio.run(whole_stack(args.world, args.duration)),
-               "ray_casting": ray_casting(args.world)}
+    logging.disable(logging.WARNING)  # the notes about components not written yet
+    runs = [asyncio.run(whole_stack(args.world, args.duration)) for _ in range(args.repeat)]
+    factors = [run["realtime_factor"] for run in runs]
+    stack = sorted(runs, key=lambda run: run["realtime_factor"])[len(runs) // 2]
+    stack["realtime_factor_min"], stack["realtime_factor_max"] = min(factors), max(factors)
+    results = {"whole_stack": stack, "ray_casting": ray_casting(args.world)}
     if args.json:
         print(json.dumps(results, indent=2))
         return
-    stack = results["whole_stack"]
     print(f"whole sensing stack, {args.world.name}: {stack['sim_time_s']} s simulated in "
-          f"{stack['wall_time_s']} s wall = {stack['realtime_factor']}x real time "
+          f"{stack['wall_time_s']} s wall = {stack['realtime_factor']}x real time, median of "
+          f"{len(runs)} (range {min(factors)}-{max(factors)}x; target {TARGET:g}x: "
+          f"{'met' if stack['realtime_factor'] >= TARGET else 'NOT met'}) "
           f"({stack['events']} events, {stack['events_per_wall_s']}/s wall)")
     for name, value in results["ray_casting"].items():
         print(f"  {name:28s} {value}")

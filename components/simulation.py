@@ -346,7 +346,8 @@ class RaptorSimulation:
         if not waypoints or self._next_waypoint >= len(waypoints):
             return
         target = waypoints[self._next_waypoint]
-        if math.hypot(self.state.east - target.east, self.state.north - target.north) <= WAYPOINT_TOLERANCE:
+        distance = math.hypot(self.state.east - target.east, self.state.north - target.north)
+        if distance <= WAYPOINT_TOLERANCE:
             self.waypoints_reached += 1
             self._next_waypoint += 1
             if self.world.mission.patrol:

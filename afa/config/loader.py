@@ -4,7 +4,8 @@
 parameter set's model by its Miro type name, validates it, and checks the Launcher's
 references. Every problem is collected and reported at once, one line each::
 
-    configs/raptor.xml:57: NodLaserConfig/Laser12/Motorate: unknown parameter (did you mean 'Motorrates'?)
+    configs/raptor.xml:57: NodLaserConfig/Laser12/Motorate: unknown parameter
+        (did you mean 'Motorrates'?)
 """
 
 from __future__ import annotations
@@ -46,7 +47,8 @@ class LauncherEntry(Parameters):
     Section: str = param("", description="Configuration section holding its parameters")
     Instance: str = param("", description="Named instance in that section ('' = default set)")
     Enabled: bool = param(True, description="Component is in the autolaunch group")
-    Period: float = param(0.0, unit="s", description="Delay before launching the next component (dT)")
+    Period: float = param(0.0, unit="s",
+                          description="Delay before launching the next component (dT)")
     Restart: bool = param(True, description="Restart the component with backoff when it fails")
 
 

@@ -114,7 +114,8 @@ def parse_document(data: bytes, path: Path) -> MiroDocument:
     sections: dict[str, Section] = {}
     for element in root:
         if element.tag != "section":
-            raise ConfigError(f"{path}:{element.sourceline}: expected <section>, got <{element.tag}>")
+            raise ConfigError(
+                f"{path}:{element.sourceline}: expected <section>, got <{element.tag}>")
         name = _attribute(path, element, "name")
         if name in sections:
             raise ConfigError(f"{path}:{element.sourceline}: section {name!r} appears twice "
@@ -126,7 +127,8 @@ def parse_document(data: bytes, path: Path) -> MiroDocument:
 def _attribute(path: Path, element: etree._Element, name: str) -> str:
     value = element.get(name)
     if value is None:
-        raise ConfigError(f"{path}:{element.sourceline}: <{element.tag}> needs a {name!r} attribute")
+        raise ConfigError(
+            f"{path}:{element.sourceline}: <{element.tag}> needs a {name!r} attribute")
     return value
 
 

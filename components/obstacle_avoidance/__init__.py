@@ -3,6 +3,7 @@
 from afa.registry import not_implemented
 from components.obstacle_avoidance.parameters import ObstacleAvoidanceParameters
 
-ObstacleAvoidance = not_implemented("ObstacleAvoidance", ObstacleAvoidanceParameters, "Obstacle Avoidance: the planning capability")
+ObstacleAvoidance = not_implemented("ObstacleAvoidance", ObstacleAvoidanceParameters,
+                                    "Obstacle Avoidance: the planning capability")
 
 __all__ = ["ObstacleAvoidance", "ObstacleAvoidanceParameters"]

@@ -3,6 +3,7 @@
 from afa.registry import not_implemented
 from components.obstacle_detection.parameters import ObstacleDetectionParameters
 
-ObstacleDetection = not_implemented("ObstacleDetection", ObstacleDetectionParameters, "Obstacle Detection: the planning capability")
+ObstacleDetection = not_implemented("ObstacleDetection", ObstacleDetectionParameters,
+                                    "Obstacle Detection: the planning capability")
 
 __all__ = ["ObstacleDetection", "ObstacleDetectionParameters"]

@@ -3,6 +3,7 @@
 from afa.registry import not_implemented
 from components.pure_pursuit.parameters import PurePursuitParameters
 
-PurePursuit = not_implemented("PurePursuit", PurePursuitParameters, "Pure Pursuit: the planning capability")
+PurePursuit = not_implemented("PurePursuit", PurePursuitParameters,
+                              "Pure Pursuit: the planning capability")
 
 __all__ = ["PurePursuit", "PurePursuitParameters"]

@@ -3,6 +3,7 @@
 from afa.registry import not_implemented
 from components.traversability_map.parameters import TraversabilityMapParameters
 
-TraversabilityMap = not_implemented("TraversabilityMap", TraversabilityMapParameters, "Traversability Map: the maps capability")
+TraversabilityMap = not_implemented("TraversabilityMap", TraversabilityMapParameters,
+                                    "Traversability Map: the maps capability")
 
 __all__ = ["TraversabilityMap", "TraversabilityMapParameters"]

@@ -122,7 +122,7 @@ async def test_publishes_4_hz_fixes_that_match_the_truth() -> None:
         LogCommand(None, "BESTUTMB", "ONTIME", 0.25)]
     assert 39 <= len(got) <= 41
     times = [e.time for e in got]
-    assert all(b - a == pytest.approx(0.25) for a, b in zip(times, times[1:]))
+    assert all(b - a == pytest.approx(0.25) for a, b in zip(times, times[1:], strict=False))
     solutions = solutions_by_time(fake)
     for event in got:
         body = event.body
@@ -244,9 +244,9 @@ async def test_a_lost_receiver_is_reconnected_and_another_gps_keeps_running() ->
     assert gps.state is State.STOPPED and gps.failures == 0
     resumed = [e.time for e in drain(mine) if e.time > plugged_at]
     assert len(resumed) >= 6
-    assert all(b - a == pytest.approx(0.25) for a, b in zip(resumed, resumed[1:]))
+    assert all(b - a == pytest.approx(0.25) for a, b in zip(resumed, resumed[1:], strict=False))
     times = [e.time for e in drain(theirs)]
-    assert max(b - a for a, b in zip(times, times[1:])) == pytest.approx(0.25)
+    assert max(b - a for a, b in zip(times, times[1:], strict=False)) == pytest.approx(0.25)
     assert len(times) >= 23  # ~6 s at 4 Hz, never paused
 
 
@@ -422,8 +422,8 @@ async def test_fake_answers_unknown_logs_with_an_error_and_obeys_unlogall() -> N
     await fake.aclose()
 
 
-async def test_afa_decode_on_a_capture_the_fake_produced(tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
+async def test_afa_decode_on_a_capture_the_fake_produced(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     clock = VirtualClock(start=START)
     fake = FakeGps(clock, driving, np.random.default_rng(9))
     host = await open_fake(fake)

@@ -3,6 +3,7 @@
 from typing import Annotated
 
 import numpy as np
+import pydantic
 import pytest
 
 from afa import ChannelClosed, Event, EventChannel, Overflow, VirtualClock
@@ -128,7 +129,7 @@ def test_bodies_are_immutable_so_fan_out_shares_them_safely():
     assert np.all(event_a.body.points == 1)
     with pytest.raises(ValueError):
         event_a.body.points[0, 0] = 3  # read-only
-    with pytest.raises(Exception):
+    with pytest.raises(pydantic.ValidationError):
         event_a.body.points = points  # frozen model
 
 
