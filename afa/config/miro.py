@@ -31,7 +31,8 @@ from lxml import etree
 
 from afa.errors import ConfigError
 
-__all__ = ["read_document", "MiroDocument", "Section", "ParameterSet", "MAX_FILE_BYTES"]
+__all__ = ["read_document", "MiroDocument", "Section", "ParameterSet", "MAX_FILE_BYTES",
+           "read_bounded", "parse_xml"]
 
 #: Configuration files larger than this are refused (the Raptor's is ~20 kB).
 MAX_FILE_BYTES = 4 * 1024 * 1024
@@ -72,10 +73,37 @@ class MiroDocument:
     sections: dict[str, Section]
 
 
-def _parser() -> etree.XMLParser:
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
-                           dtd_validation=False, huge_tree=False, remove_comments=True,
-                           remove_pis=True)
+def read_bounded(path: Path, limit: int) -> bytes:
+    """The bytes of ``path``. Raises :class:`~afa.errors.ConfigError` (``path:1``) if the
+    file is larger than ``limit`` bytes; an :class:`OSError` is left to the caller, who
+    knows what kind of file could not be read."""
+    size = path.stat().st_size
+    if size > limit:
+        raise ConfigError(f"{path}:1: file is {size} bytes; the limit is {limit}")
+    return path.read_bytes()
+
+
+def parse_xml(data: bytes, path: Path) -> etree._Element:
+    """Parse XML hardened against hostile files: no DTD loading, no entity resolution,
+    no network, no internal DTD subset (so no entity expansion), no entity references.
+    Every XML file afa reads (configuration, geometry, worlds) goes through here.
+
+    Raises :class:`~afa.errors.ConfigError` (``path:line: message``).
+    """
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
+                             dtd_validation=False, huge_tree=False, remove_comments=True,
+                             remove_pis=True)
+    try:
+        root = etree.fromstring(data, parser=parser)
+    except etree.XMLSyntaxError as exc:
+        raise ConfigError(f"{path}:{exc.lineno or 1}: XML syntax error: {exc.msg}") from None
+    if root.getroottree().docinfo.internalDTD is not None:
+        raise ConfigError(f"{path}:1: a DTD internal subset is not allowed (entities and "
+                          "entity expansion are refused)")
+    for node in root.iter():
+        if isinstance(node, etree._Entity):
+            raise ConfigError(f"{path}:{node.sourceline}: entity references are not allowed")
+    return root
 
 
 def read_document(path: str | Path) -> MiroDocument:
@@ -86,10 +114,7 @@ def read_document(path: str | Path) -> MiroDocument:
     """
     path = Path(path)
     try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise ConfigError(f"{path}:1: file is {size} bytes; the limit is {MAX_FILE_BYTES}")
-        data = path.read_bytes()
+        data = read_bounded(path, MAX_FILE_BYTES)
     except OSError as exc:
         raise ConfigError(f"{path}:0: cannot read: {exc.strerror or exc}") from exc
     return parse_document(data, path)
@@ -97,17 +122,7 @@ def read_document(path: str | Path) -> MiroDocument:
 
 def parse_document(data: bytes, path: Path) -> MiroDocument:
     """Parse configuration bytes (``path`` is used in messages)."""
-    try:
-        root = etree.fromstring(data, parser=_parser())
-    except etree.XMLSyntaxError as exc:
-        raise ConfigError(f"{path}:{exc.lineno or 1}: XML syntax error: {exc.msg}") from None
-    tree = root.getroottree()
-    if tree.docinfo.internalDTD is not None:
-        raise ConfigError(f"{path}:1: a DTD internal subset is not allowed (entities and "
-                          "entity expansion are refused)")
-    for node in root.iter():
-        if isinstance(node, etree._Entity):
-            raise ConfigError(f"{path}:{node.sourceline}: entity references are not allowed")
+    root = parse_xml(data, path)
     if root.tag != "config":
         raise ConfigError(f"{path}:{root.sourceline}: the root element must be <config>, "
                           f"not <{root.tag}>")

@@ -32,6 +32,7 @@ from typing import Literal
 
 from lxml import etree
 
+from afa.config.miro import parse_xml, read_bounded
 from afa.errors import ConfigError
 
 __all__ = [
@@ -274,13 +275,6 @@ class World:
 
 
 # --------------------------------------------------------------------------- parsing
-def _xml_parser() -> etree.XMLParser:
-    # Same hardening as afa.config.miro: nothing is fetched, nothing is expanded.
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
-                           dtd_validation=False, huge_tree=False, remove_comments=True,
-                           remove_pis=True)
-
-
 _OBSTACLE_FIELDS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     # type: (required attributes, optional attributes) besides "type"
     "box": (("east", "north", "length", "width", "height"), ("heading",)),
@@ -381,10 +375,7 @@ def load_world(path: str | Path) -> World:
     """
     path = Path(path)
     try:
-        size = path.stat().st_size
-        if size > MAX_WORLD_BYTES:
-            raise ConfigError(f"{path}:1: file is {size} bytes; the limit is {MAX_WORLD_BYTES}")
-        data = path.read_bytes()
+        data = read_bounded(path, MAX_WORLD_BYTES)
     except OSError as exc:
         raise ConfigError(f"{path}:0: cannot read world file: {exc.strerror or exc}") from exc
     return parse_world(data, path)
@@ -395,16 +386,7 @@ def parse_world(data: bytes, path: str | Path = "<world>") -> World:
     path = Path(path)
     if len(data) > MAX_WORLD_BYTES:
         raise ConfigError(f"{path}:1: world is {len(data)} bytes; the limit is {MAX_WORLD_BYTES}")
-    try:
-        root = etree.fromstring(data, parser=_xml_parser())
-    except etree.XMLSyntaxError as exc:
-        raise ConfigError(f"{path}:{exc.lineno or 1}: XML syntax error: {exc.msg}") from None
-    if root.getroottree().docinfo.internalDTD is not None:
-        raise ConfigError(f"{path}:1: a DTD internal subset is not allowed (entities and "
-                          "entity expansion are refused)")
-    for node in root.iter():
-        if isinstance(node, etree._Entity):
-            raise ConfigError(f"{path}:{node.sourceline}: entity references are not allowed")
+    root = parse_xml(data, path)
     reader = _Reader(path)
     world = _read_world(reader, root)
     if reader.problems or world is None:

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
+from afa.config.miro import parse_xml, read_bounded
 from afa.errors import ConfigError, EOutOfBounds
 
 __all__ = [
@@ -183,31 +184,13 @@ class _BodyFile:
 # ------------------------------------------------------------------ XML reading
 
 
-def _parser() -> etree.XMLParser:
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
-                           dtd_validation=False, huge_tree=False, remove_comments=True,
-                           remove_pis=True)
-
-
 def _read_xml(path: Path, root_tag: str, where: str) -> etree._Element:
     """Parse one geometry file safely; ``where`` prefixes messages about reading it."""
     try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise ConfigError(f"{path}:1: file is {size} bytes; the limit is {MAX_FILE_BYTES}")
-        data = path.read_bytes()
+        data = read_bounded(path, MAX_FILE_BYTES)
     except OSError as exc:
         raise ConfigError(f"{where}: cannot read {path}: {exc.strerror or exc}") from exc
-    try:
-        root = etree.fromstring(data, parser=_parser())
-    except etree.XMLSyntaxError as exc:
-        raise ConfigError(f"{path}:{exc.lineno or 1}: XML syntax error: {exc.msg}") from None
-    if root.getroottree().docinfo.internalDTD is not None:
-        raise ConfigError(f"{path}:1: a DTD internal subset is not allowed (entities are "
-                          "refused)")
-    for node in root.iter():
-        if isinstance(node, etree._Entity):
-            raise ConfigError(f"{path}:{node.sourceline}: entity references are not allowed")
+    root = parse_xml(data, path)
     if root.tag != root_tag:
         raise ConfigError(f"{path}:{root.sourceline}: the root element must be <{root_tag}>, "
                           f"not <{root.tag}>")
