@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import re
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import date
 from enum import IntEnum
@@ -1126,44 +1127,36 @@ class GpsDecoder(StreamDecoder[GpsMessage]):
             if partial is not None and len(probe) < 40:
                 return Scan.need_more()
             return Scan.skip(1, Fault.GARBAGE)
-        star = self._find_star(buffer, start, _MAX_ASCII_LOG)
-        if star is None:
-            return Scan.need_more()
-        if isinstance(star, Fault):
-            return Scan.skip(1, star)
-        digits = bytes(buffer[star + 1:star + 9])
-        if not all(b in _HEX for b in digits):
-            return Scan.skip(1, Fault.MALFORMED)
-        if len(digits) < 8:
-            return Scan.need_more()
-        body = bytes(buffer[start + 1:star])
-        if crc32_novatel(body) != int(digits, 16):
-            return Scan.skip(1, Fault.CHECKSUM)
-        try:
-            return Scan.frame(star + 9 - start, _decode_ascii_log(body.decode("ascii")))
-        except (_Malformed, ValueError, IndexError):
-            return Scan.skip(1, Fault.MALFORMED)
+        return self._scan_starred(buffer, start, _MAX_ASCII_LOG, 8, crc32_novatel,
+                                  _decode_ascii_log)
 
     def _scan_nmea(self, buffer: bytearray, start: int) -> Scan[GpsMessage]:
         # '$' + at least two address characters before anything else.
         for i in range(start + 1, min(len(buffer), start + 3)):
             if buffer[i] not in _NMEA_ADDRESS_CHARS:
                 return Scan.skip(1, Fault.GARBAGE)
-        star = self._find_star(buffer, start, _MAX_NMEA)
+        return self._scan_starred(buffer, start, _MAX_NMEA, 2, nmea_checksum, _decode_nmea)
+
+    def _scan_starred(self, buffer: bytearray, start: int, limit: int, n_digits: int,
+                      checksum: Callable[[bytes], int],
+                      decode: Callable[[str], GpsMessage]) -> Scan[GpsMessage]:
+        """The common tail of NovAtel ASCII logs and NMEA sentences: the body up to
+        ``*``, ``n_digits`` hex digits of ``checksum(body)``, then ``decode`` the body."""
+        star = self._find_star(buffer, start, limit)
         if star is None:
             return Scan.need_more()
         if isinstance(star, Fault):
             return Scan.skip(1, star)
-        digits = bytes(buffer[star + 1:star + 3])
+        digits = bytes(buffer[star + 1:star + 1 + n_digits])
         if not all(b in _HEX for b in digits):
             return Scan.skip(1, Fault.MALFORMED)
-        if len(digits) < 2:
+        if len(digits) < n_digits:
             return Scan.need_more()
         body = bytes(buffer[start + 1:star])
-        if nmea_checksum(body) != int(digits, 16):
+        if checksum(body) != int(digits, 16):
             return Scan.skip(1, Fault.CHECKSUM)
         try:
-            return Scan.frame(star + 3 - start, _decode_nmea(body.decode("ascii")))
+            return Scan.frame(star + 1 + n_digits - start, decode(body.decode("ascii")))
         except (_Malformed, ValueError, IndexError):
             return Scan.skip(1, Fault.MALFORMED)
 
