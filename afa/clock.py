@@ -102,24 +102,8 @@ class Clock(ABC):
         if seconds is None:
             yield
             return
-        task = asyncio.current_task()
-        assert task is not None, "timeout() needs a running task"
-        fired = False
-
-        def expire() -> None:
-            nonlocal fired
-            fired = True
-            task.cancel()
-
-        handle = self.call_at(self.now() + seconds, expire)
-        try:
+        async with self._deadline(seconds, f"{what} timed out after {seconds:g} s"):
             yield
-        except asyncio.CancelledError:
-            if fired and task.uncancel() == 0:
-                raise ETimeOut(f"{what} timed out after {seconds:g} s") from None
-            raise
-        finally:
-            handle.cancel()
 
     @asynccontextmanager
     async def watchdog(self, seconds: float, what: str = "operation") -> AsyncIterator[Watchdog]:
@@ -132,14 +116,22 @@ class Clock(ABC):
         """
         if not seconds > 0:
             raise ValueError(f"seconds must be positive, got {seconds}")
+        async with self._deadline(seconds, f"{what}: nothing for {seconds:g} s") as dog:
+            yield dog
+
+    @asynccontextmanager
+    async def _deadline(self, seconds: float, message: str) -> AsyncIterator[Watchdog]:
+        """The body runs under a :class:`Watchdog`; when it fires, the cancellation it
+        causes becomes ``ETimeOut(message)`` (a cancellation from outside stays one). A
+        :meth:`timeout` is a watchdog nobody feeds."""
         task = asyncio.current_task()
-        assert task is not None, "watchdog() needs a running task"
+        assert task is not None, "timeouts and watchdogs need a running task"
         dog = Watchdog(self, seconds, task)
         try:
             yield dog
         except asyncio.CancelledError:
             if dog.fired and task.uncancel() == 0:
-                raise ETimeOut(f"{what}: nothing for {seconds:g} s") from None
+                raise ETimeOut(message) from None
             raise
         finally:
             dog.stop()
