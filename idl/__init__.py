@@ -52,6 +52,7 @@ from idl.range import (
     Range3dLaserIDL,
     Range3dSeqEventIDL,
     Range3dStereoEventIDL,
+    select_valid,
 )
 from idl.sensors import UTM_ZONE_LETTERS, GpsIDL, ImuIDL, WheelDataIDL, WheelEventIDL
 from idl.vehicle import MinMaxVelocityIDL, VelocityDataIDL, VelocityIDL
@@ -66,7 +67,7 @@ __all__ = [
     "ImuIDL", "GpsIDL", "WheelDataIDL", "WheelEventIDL", "UTM_ZONE_LETTERS",
     # range
     "Range3dLaserIDL", "Range3dSeqEventIDL", "Range3dStereoEventIDL",
-    "Range3dArrayEventIDL", "Points",
+    "Range3dArrayEventIDL", "Points", "select_valid",
     # maps
     "MapArrayEventIDL", "MapSeqEventIDL", "EgoMapArrayEventIDL", "EgoMapSeqEventIDL",
     "TravMapArrayEventIDL", "EtravMapArrayEventIDL", "PlanMapEventIDL",

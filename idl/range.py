@@ -32,6 +32,7 @@ __all__ = [
     "Range3dStereoEventIDL",
     "Range3dArrayEventIDL",
     "Points",
+    "select_valid",
 ]
 
 #: An ``(n, 3)`` float32 point array, metres.
@@ -68,6 +69,14 @@ def _check_static(points: np.ndarray, valid: np.ndarray, what: str) -> None:
         raise ValueError(f"{what}: invalid slots must hold NaN in all coordinates")
 
 
+def select_valid(points: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """``points[valid]`` as a fresh ``(n, 3)`` array in row-major order, for the static
+    array forms (beams ``(N, 3)`` with ``(N,)`` flags, pixels ``(R, C, 3)`` with
+    ``(R, C)``). ``np.compress`` on the flattened rows is several times faster than a
+    boolean mask over a 3-D array."""
+    return np.compress(np.ravel(valid), points.reshape(-1, 3), axis=0)
+
+
 def _check_sequence(points: np.ndarray, what: str) -> None:
     if not np.all(np.isfinite(points)):
         raise ValueError(f"{what}: a sequence holds only valid (finite) points")
@@ -96,7 +105,7 @@ class Range3dLaserIDL(_NodAngles, _RangeHeader):
 
     def valid_points(self) -> np.ndarray:
         """The valid points, ``(count, 3)``, in beam order."""
-        return self.points[self.valid]
+        return select_valid(self.points, self.valid)
 
     def to_seq(self) -> Range3dSeqEventIDL:
         """The sequence form of this scan (only the valid points)."""
@@ -145,7 +154,7 @@ class Range3dStereoEventIDL(_RangeHeader):
 
     def valid_points(self) -> np.ndarray:
         """The valid points, ``(count, 3)``, in row-major pixel order."""
-        return self.points[self.valid]
+        return select_valid(self.points, self.valid)
 
     def to_array_event(self) -> Range3dArrayEventIDL:
         """The sequence form of this frame (only the valid points)."""

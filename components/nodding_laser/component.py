@@ -73,6 +73,7 @@ from idl import (
     Range3dSeqEventIDL,
     Range3dStereoEventIDL,
     TimeIDL,
+    select_valid,
 )
 
 __all__ = [
@@ -227,7 +228,7 @@ class _ScanLine:
 
     @cached_property
     def seq(self) -> Range3dSeqEventIDL:
-        points = np.compress(self.valid, self.points, axis=0)
+        points = select_valid(self.points, self.valid)
         points.flags.writeable = False  # a fresh array: the IDL need not copy it again
         return Range3dSeqEventIDL(time=self.time, sensorId=self.sensor_id, frame=self.frame,
                                   nodAngleStart=self.nod_start, nodAngleEnd=self.nod_end,
