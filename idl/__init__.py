@@ -1,12 +1,23 @@
 """The IDL of afa: every event type and polled interface the seed names.
 
 Types are frozen pydantic models (:class:`IDLModel`) with read-only numpy arrays; they
-serialise losslessly with ``to_json`` / ``from_json``. Interfaces subclass
+serialise losslessly to the binary wire form (:mod:`idl.wire`: logs, network, console)
+and to JSON (``to_json`` / ``from_json``). Interfaces subclass
 :class:`Interface` and carry the seed's method names. This package imports only the
 standard library, numpy and pydantic. Reference: ``docs/idl.md``.
 """
 
-from idl._base import Array, IDLModel, Interface, MethodSpec, field, idl_types
+from idl import wire
+from idl._base import (
+    Array,
+    IDLModel,
+    Interface,
+    MethodSpec,
+    TypeRegistryError,
+    field,
+    idl_types,
+    type_name,
+)
 from idl.common import (
     HTransform4x4,
     PoseTransformIDL,
@@ -59,7 +70,8 @@ from idl.vehicle import MinMaxVelocityIDL, VelocityDataIDL, VelocityIDL
 
 __all__ = [
     # foundations
-    "IDLModel", "Array", "field", "Interface", "MethodSpec", "idl_types",
+    "IDLModel", "Array", "field", "Interface", "MethodSpec", "idl_types", "type_name",
+    "TypeRegistryError", "wire",
     # common
     "TimeIDL", "Position3DIDL", "StringSequenceIDL", "PoseTransformIDL",
     "HTransform4x4", "Vector3", "check_homogeneous",

@@ -6,8 +6,16 @@ used by tools that do not load the framework.
 - :class:`IDLModel` is the base of every event body and polled value. Instances are
   frozen and numpy fields are read-only, so one event body can be delivered to every
   subscriber without copies and without one consumer changing what another sees.
-  Every model serialises losslessly with :meth:`IDLModel.to_json` /
-  :meth:`IDLModel.from_json` (arrays as dtype, shape and base64 bytes).
+  Every model has two lossless forms: the binary wire form of :mod:`idl.wire` (arrays
+  as raw buffers beside a JSON header: logs, the network, the console) and a JSON form,
+  :meth:`IDLModel.to_json` / :meth:`IDLModel.from_json` (arrays as dtype, shape and
+  base64), for people and tools that only speak JSON.
+- One rule for non-finite floats in JSON, in both forms: ``"Infinity"``,
+  ``"-Infinity"`` and ``"NaN"`` as strings (a browser's ``JSON.parse`` accepts them and
+  ``Number("Infinity")`` converts; pydantic reads them back).
+- Every public model is registered under a qualified, versioned *type name*
+  (:func:`type_name`, e.g. ``idl.sensors.GpsIDL@1``); a second class claiming a
+  registered name is refused.
 - :func:`Array` annotates a numpy field with its dtype and shape (``None`` for a free
   dimension): ``Annotated[np.ndarray, Array("float64", (None, 3))]``.
 - :func:`field` declares a field with its unit and description.
@@ -18,6 +26,7 @@ used by tools that do not load the framework.
 from __future__ import annotations
 
 import base64
+import functools
 import hashlib
 import inspect
 import typing
@@ -26,29 +35,63 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, GetCoreSchemaHandler
+import pydantic
+from pydantic import BaseModel, ConfigDict, Field, GetCoreSchemaHandler, GetJsonSchemaHandler
+from pydantic.json_schema import JsonSchemaValue
 from pydantic_core import PydanticCustomError, core_schema
+from pydantic_core.core_schema import ValidationInfo
 
-__all__ = ["IDLModel", "Array", "field", "Interface", "MethodSpec", "idl_types"]
+__all__ = ["IDLModel", "Array", "field", "Interface", "MethodSpec", "idl_types", "type_name",
+           "TypeRegistryError"]
 
 _TYPES: dict[str, type[IDLModel]] = {}
 
 
+class TypeRegistryError(TypeError):
+    """Two IDL classes claim one type name."""
+
+
 def idl_types() -> Mapping[str, type[IDLModel]]:
-    """Every IDL model class by name (the names used when events are serialised)."""
+    """Every registered IDL model class by qualified name (without the version)."""
     return _TYPES
 
 
-class IDLModel(BaseModel):
-    """Base of every IDL struct: frozen, no unknown fields, lossless JSON."""
+def type_name(cls: type[IDLModel]) -> str:
+    """The qualified, versioned name a model travels under: ``module.Class@version``."""
+    return f"{cls.idl_name}@{cls.idl_version}"
 
-    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
+
+class IDLModel(BaseModel):
+    """Base of every IDL struct: frozen, no unknown fields, lossless serialisation.
+
+    ``idl_name`` (default ``module.QualifiedName``) and ``idl_version`` (default 1) name
+    the type on the wire; raise the version when a change makes old data unreadable.
+    Classes whose name starts with ``_`` and classes defined inside functions without an
+    explicit ``idl_name`` are not registered (they can still be encoded, and decoded
+    when the class is given).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True,
+                              ser_json_inf_nan="strings")
+
+    idl_name: ClassVar[str] = ""
+    idl_version: ClassVar[int] = 1
 
     @classmethod
     def __pydantic_init_subclass__(cls, **kwargs: Any) -> None:
         super().__pydantic_init_subclass__(**kwargs)
-        if not cls.__name__.startswith("_"):
-            _TYPES[cls.__name__] = cls
+        if "idl_name" not in cls.__dict__:
+            cls.idl_name = f"{cls.__module__}.{cls.__qualname__}"
+            if "<locals>" in cls.__qualname__:
+                return
+        if cls.__name__.startswith("_"):
+            return
+        known = _TYPES.get(cls.idl_name)
+        if known is not None and known is not cls:
+            raise TypeRegistryError(
+                f"IDL type name {cls.idl_name!r} is already taken by {known.__module__}."
+                f"{known.__qualname__}; give {cls.__qualname__} another idl_name")
+        _TYPES[cls.idl_name] = cls
 
     def to_json(self) -> bytes:
         """Serialise losslessly (numpy arrays included)."""
@@ -87,12 +130,16 @@ class IDLModel(BaseModel):
 
 #: Serialisation context of :meth:`IDLModel.fingerprint` (compared by identity).
 _FINGERPRINT: dict[str, bool] = {"fingerprint": True}
+#: Context key under which :mod:`idl.wire` collects (encoding) or supplies (decoding) the
+#: raw array buffers that travel beside the JSON header.
+WIRE_BUFFERS = "afa.wire.buffers"
 
 
 def field(default: Any = ..., *, unit: str = "", description: str = "", **kwargs: Any) -> Any:
     """A model field with its unit (``"m"``, ``"rad/s"``, ``"1"`` for dimensionless)."""
-    extra = {"unit": unit} if unit else {}
-    return Field(default, description=description, json_schema_extra=extra or None, **kwargs)
+    extra: dict[str, Any] = {"unit": unit} if unit else {}
+    return Field(default, description=description, json_schema_extra=extra or None,  # type: ignore[arg-type]
+                 **kwargs)
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,17 +152,38 @@ class Array:
     def __get_pydantic_core_schema__(
         self, source: Any, handler: GetCoreSchemaHandler
     ) -> core_schema.CoreSchema:
-        return core_schema.no_info_plain_validator_function(
+        return core_schema.with_info_plain_validator_function(
             self._validate,
             serialization=core_schema.plain_serializer_function_ser_schema(
                 self._serialize, info_arg=True
             ),
         )
 
-    def _validate(self, value: Any) -> np.ndarray:
-        if isinstance(value, Mapping) and "data" in value and "dtype" in value:
-            raw = base64.b64decode(value["data"])
-            value = np.frombuffer(raw, dtype=np.dtype(value["dtype"])).reshape(value["shape"])
+    def __get_pydantic_json_schema__(
+        self, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler
+    ) -> JsonSchemaValue:
+        """An array is an object with its dtype and shape, and either its bytes in base64
+        (the JSON form) or the index of a buffer beside the header (the wire form)."""
+        dims = len(self.shape)
+        return {
+            "type": "object",
+            "title": f"ndarray[{self.dtype}, {tuple('n' if d is None else d for d in self.shape)}]",
+            "properties": {
+                "dtype": {"type": "string", "description": "numpy dtype string, e.g. '<f4'"},
+                "shape": {"type": "array", "items": {"type": "integer", "minimum": 0},
+                          "minItems": dims, "maxItems": dims},
+                "data": {"type": "string", "contentEncoding": "base64",
+                         "description": "C-order bytes (JSON form)"},
+                "$array": {"type": "integer", "minimum": 0,
+                           "description": "index of the raw buffer (wire form)"},
+            },
+            "required": ["dtype", "shape"],
+            "x-afa-array": {"dtype": self.dtype, "shape": list(self.shape)},
+        }
+
+    def _validate(self, value: Any, info: ValidationInfo) -> np.ndarray:
+        if isinstance(value, Mapping) and "dtype" in value:
+            value = self._from_mapping(value, info.context)
         try:
             array = np.asarray(value, dtype=np.dtype(self.dtype))
         except (TypeError, ValueError) as exc:
@@ -134,15 +202,40 @@ class Array:
             array.flags.writeable = False
         return array
 
-    def _serialize(self, value: np.ndarray, info: Any) -> Any:
-        if info.mode == "json":
-            contiguous = np.ascontiguousarray(value)
-            if info.context is _FINGERPRINT:
-                content = {"sha256": hashlib.sha256(contiguous).hexdigest()}
+    def _from_mapping(self, value: Mapping[str, Any], context: Any) -> Any:
+        """An array from its JSON (base64) or wire (buffer index) description."""
+        try:
+            dtype = np.dtype(value["dtype"])
+            shape = tuple(int(n) for n in value["shape"])
+            if dtype.hasobject or any(n < 0 for n in shape):
+                raise ValueError("object dtypes and negative dimensions are refused")
+            if "$array" in value:
+                buffers = context.get(WIRE_BUFFERS) if isinstance(context, Mapping) else None
+                if buffers is None:
+                    raise ValueError("a wire array reference outside a wire frame")
+                raw = buffers[int(value["$array"])]
             else:
-                content = {"data": base64.b64encode(contiguous.tobytes()).decode("ascii")}
-            return {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape), **content}
-        return value
+                raw = base64.b64decode(value["data"], validate=True)
+            return np.frombuffer(raw, dtype=dtype).reshape(shape)
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise PydanticCustomError("ndarray", "bad array description: {err}",
+                                      {"err": str(exc)}) from None
+
+    def _serialize(self, value: np.ndarray, info: Any) -> Any:
+        if info.mode != "json":
+            return value
+        contiguous = np.ascontiguousarray(value)
+        head: dict[str, Any] = {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape)}
+        context = info.context
+        if context is _FINGERPRINT:
+            head["sha256"] = hashlib.sha256(contiguous.data).hexdigest()
+        elif isinstance(context, dict) and WIRE_BUFFERS in context:
+            buffers: list[np.ndarray] = context[WIRE_BUFFERS]
+            head["$array"] = len(buffers)
+            buffers.append(contiguous)
+        else:
+            head["data"] = base64.b64encode(contiguous.tobytes()).decode("ascii")
+        return head
 
 
 @dataclass(frozen=True)
@@ -161,6 +254,30 @@ class MethodSpec:
     def hints(self) -> dict[str, Any]:
         """Resolved annotations (parameters and ``return``)."""
         return typing.get_type_hints(self.function, include_extras=True)
+
+    @functools.cached_property
+    def arguments_model(self) -> type[IDLModel]:
+        """An IDL model whose fields are the method's parameters: how a call's arguments
+        travel through :mod:`idl.wire` (to another process, into a log)."""
+        hints = self.hints()
+        fields: dict[str, Any] = {}
+        for name in self.parameters:
+            default = self.signature.parameters[name].default
+            fields[name] = (hints.get(name, Any),
+                            ... if default is inspect.Parameter.empty else default)
+        return self._model("arguments", fields)
+
+    @functools.cached_property
+    def result_model(self) -> type[IDLModel]:
+        """An IDL model with one field, ``result``: how a call's result travels."""
+        return self._model("result", {"result": (self.hints().get("return", type(None)), ...)})
+
+    def _model(self, what: str, fields: dict[str, Any]) -> type[IDLModel]:
+        owner = self.function.__qualname__.rpartition(".")[0]
+        model: type[IDLModel] = pydantic.create_model(  # type: ignore[call-overload]
+            f"{owner}.{self.name}.{what}", __base__=IDLModel,
+            __module__=self.function.__module__, **fields)
+        return model
 
 
 class Interface:

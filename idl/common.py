@@ -12,7 +12,7 @@ import math
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import ConfigDict, model_validator
+from pydantic import model_validator
 
 from idl._base import Array, IDLModel, field
 
@@ -35,14 +35,8 @@ _BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 class _Struct(IDLModel):
-    """Private base of this package's structs.
-
-    Scalar ``inf`` / ``NaN`` (e.g. an impassable planning cost) are written as the JSON
-    constants ``Infinity`` / ``NaN`` instead of pydantic's default ``null``, so they
-    survive a round trip (Python's ``json`` module and pydantic both read them back).
-    """
-
-    model_config = ConfigDict(ser_json_inf_nan="constants")
+    """Private base of this package's structs (scalar ``inf`` / ``NaN`` travel as the
+    strings ``"Infinity"`` / ``"NaN"``, the one rule of :class:`~idl._base.IDLModel`)."""
 
 
 def check_homogeneous(matrix: np.ndarray, what: str, *, tolerance: float = 1e-9) -> None:

@@ -13,7 +13,7 @@ import math
 from typing import Annotated
 
 import numpy as np
-from pydantic import PlainSerializer, model_validator
+from pydantic import model_validator
 
 from idl._base import Array, field
 from idl.common import TimeIDL, _Struct
@@ -32,14 +32,9 @@ __all__ = [
 IMPASSABLE = math.inf
 
 
-def _cost_to_json(value: float) -> float | str:
-    return value if math.isfinite(value) else str(value)
-
-
-#: A traversal cost: a float that may be ``inf``. JSON carries ``inf`` as the string
-#: ``"inf"`` (which pydantic reads back as a float), so a cost survives any JSON
-#: serialiser, including ones outside this package (a poll result crossing processes).
-Cost = Annotated[float, PlainSerializer(_cost_to_json, when_used="json")]
+#: A traversal cost: a float that may be ``inf`` (:data:`IMPASSABLE`). JSON carries it
+#: as the string ``"Infinity"``, the IDL's one rule for non-finite numbers.
+Cost = float
 
 
 class PlanPointIDL(_Struct):
