@@ -2,55 +2,92 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
 from afa import registry
 from afa.component import Component, RestartPolicy
-from afa.config.loader import load_configuration
-from afa.errors import ConfigError
+from afa.config.loader import Configuration, LauncherEntry, load_configuration
+from afa.errors import AfaError, ConfigError
 
 S = TypeVar("S")
 
 
-def build_system(cls: type[S], path: Path, *, strict: bool = False, **options: Any) -> S:
-    """Build ``cls`` (System) with the components ``path``'s Launcher enables."""
-    registry.load_all()  # registers every parameter model before validation
-    config = load_configuration(path)
-    components: list[Component] = []
+def build_components(config: Configuration, *, strict: bool = False,
+                     only: Iterable[str] | None = None
+                     ) -> tuple[list[Component[Any]], dict[str, float], list[str]]:
+    """The components ``config``'s Launcher enables (or those named in ``only``, enabled
+    or not), their start delays and start-up notes. Imports only their plug-ins.
+
+    Raises ConfigError naming file and line for a type that cannot be loaded (with the
+    optional extra to install when the plug-in declares one).
+    """
+    wanted = None if only is None else set(only)
+    if wanted is not None:
+        unknown = wanted - {entry.Name for entry in config.launcher.Components}
+        if unknown:
+            raise ConfigError(f"{config.path}: no Launcher entry named "
+                              f"{', '.join(sorted(unknown))}")
+    components: list[Component[Any]] = []
     delays: dict[str, float] = {}
     notes: list[str] = []
     problems: list[str] = []
-    for entry in config.launcher.Components:
-        if not entry.Enabled:
+    for index, entry in enumerate(config.launcher.Components):
+        if (entry.Name not in wanted) if wanted is not None else not entry.Enabled:
             continue
+        where = f"{config.path}:{_line(config, index)}: Launcher {entry.Name}"
         try:
             component_cls = registry.load_component(entry.Type)
-        except ConfigError as exc:
-            problems.append(f"{config.path}: Launcher {entry.Name}: {exc}")
+        except AfaError as exc:
+            problems.append(f"{where}: {exc}")
             continue
         if not registry.is_implemented(component_cls):
             message = (f"{entry.Name} ({entry.Type}) is configured but not implemented yet "
                        f"({getattr(component_cls, 'plan', '')}); it is not started")
             if strict:
-                problems.append(f"{config.path}: Launcher {entry.Name}: {message}")
+                problems.append(f"{where}: {message}")
             else:
                 notes.append(message)
             continue
-        parameters = config.parameters(entry.Section, entry.Instance) if entry.Section else None
-        expected = component_cls.Parameters
-        if expected is not None and not isinstance(parameters, expected):
-            problems.append(
-                f"{config.path}: Launcher {entry.Name}: section {entry.Section!r} holds "
-                f"{type(parameters).__name__}, but {entry.Type} needs {expected.__name__}")
-            continue
-        component = component_cls(entry.Name, parameters)
-        if not entry.Restart:
-            component.restart_policy = RestartPolicy(restart=False)  # type: ignore[misc]
-        components.append(component)
-        delays[entry.Name] = entry.Period
+        component = _build(config, entry, component_cls, where, problems)
+        if component is not None:
+            components.append(component)
+            delays[entry.Name] = entry.Period
     if problems:
         raise ConfigError(problems)
+    return components, delays, notes
+
+
+def _build(config: Configuration, entry: LauncherEntry, cls: type[Component[Any]], where: str,
+           problems: list[str]) -> Component[Any] | None:
+    parameters = config.parameters(entry.Section, entry.Instance) if entry.Section else None
+    expected = cls.parameters_type
+    if expected is not None and not isinstance(parameters, expected):
+        problems.append(f"{where}: section {entry.Section!r} holds "
+                        f"{type(parameters).__name__}, but {entry.Type} needs {expected.__name__}")
+        return None
+    try:
+        component = cls(entry.Name, parameters)
+    except AfaError as exc:
+        problems.append(f"{where}: {exc}")
+        return None
+    component.type_name = entry.Type
+    if not entry.Restart:
+        component.restart_policy = RestartPolicy(restart=False)  # type: ignore[misc]
+    return component
+
+
+def _line(config: Configuration, index: int) -> int:
+    lines = config.launcher_lines
+    return lines[index] if index < len(lines) else 0
+
+
+def build_system(cls: type[S], path: Path, *, strict: bool = False,
+                 only: Iterable[str] | None = None, **options: Any) -> S:
+    """Build ``cls`` (System) with the components ``path``'s Launcher enables."""
+    config = load_configuration(path)
+    components, delays, notes = build_components(config, strict=strict, only=only)
     options.setdefault("robot", config.robot)
     options.setdefault("base_dir", config.path.parent)
     system = cls(components, start_delays=delays, **options)  # type: ignore[call-arg]

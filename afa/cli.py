@@ -83,8 +83,14 @@ def _parser() -> argparse.ArgumentParser:
         "reference", help="print the parameter reference (docs/parameters.md)")
     reference.set_defaults(handler=_config_reference)
 
+    graph = commands.add_parser("graph", help="print the data-flow graph of a configuration")
+    graph.add_argument("config", type=Path)
+    graph.add_argument("--format", choices=["text", "mermaid", "dot", "json"], default="text",
+                       help="text (default), Mermaid, Graphviz DOT, or the catalog as JSON")
+    graph.set_defaults(handler=_graph)
+
     decode = commands.add_parser("decode", help="decode a raw device capture to JSON lines")
-    decode.add_argument("device", choices=sorted(_decoders()), help="device codec")
+    decode.add_argument("device", help="device codec: " + ", ".join(_decoders()))
     decode.add_argument("file", type=Path, help="raw capture ('-' for stdin)")
     decode.set_defaults(handler=_decode)
     return parser
@@ -92,18 +98,36 @@ def _parser() -> argparse.ArgumentParser:
 
 # -- config -----------------------------------------------------------------------------
 def _load(path: Path) -> Any:
-    from afa import registry
     from afa.config.loader import load_configuration
 
-    registry.load_all()
     return load_configuration(path)
+
+
+def _catalog(path: Path) -> Any:
+    """The catalog of the system ``path`` describes (components built, not started)."""
+    from afa.system import System
+
+    return System.from_xml(path, real_devices=False).catalog()
 
 
 def _config_check(args: argparse.Namespace) -> int:
     config = _load(args.config)
+    warnings = _catalog(args.config).problems()
+    for line in warnings:
+        print(f"{args.config}: warning: {line}", file=sys.stderr)
     count = sum(len(sets) for sets in config.sections.values())
     print(f"{args.config}: valid ({len(config.sections)} sections, {count} parameter sets, "
-          f"robot {config.robot!r}, {len(config.launcher.Components)} launcher entries)")
+          f"robot {config.robot!r}, {len(config.launcher.Components)} launcher entries"
+          f"{f', {len(warnings)} wiring warning(s)' if warnings else ''})")
+    return EXIT_OK
+
+
+def _graph(args: argparse.Namespace) -> int:
+    catalog = _catalog(args.config)
+    if args.format == "json":
+        print(json.dumps(catalog.as_dicts(), indent=2))
+    else:
+        sys.stdout.write(getattr(catalog, args.format)())
     return EXIT_OK
 
 
@@ -139,21 +163,18 @@ def _config_reference(args: argparse.Namespace) -> int:
 
 
 # -- decode -----------------------------------------------------------------------------
-def _decoders() -> dict[str, str]:
-    return {
-        "gps": "components.gps_sokkia.codec:GpsDecoder",
-        "imu": "components.imu.codec:ImuDecoder",
-        "mpc555": "components.mpc555.codec:Mpc555Decoder",
-        "sick": "components.nodding_laser.codec:NodControllerDecoder",
-    }
+def _decoders() -> list[str]:
+    from afa import registry
+
+    return registry.decoders()
 
 
 def _decode(args: argparse.Namespace) -> int:
     import dataclasses
-    import importlib
 
-    module_name, _, class_name = _decoders()[args.device].partition(":")
-    decoder = getattr(importlib.import_module(module_name), class_name)()
+    from afa import registry
+
+    decoder = registry.load_decoder(args.device)()
     try:
         data = sys.stdin.buffer.read() if str(args.file) == "-" else args.file.read_bytes()
     except OSError as exc:
@@ -213,9 +234,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def _simulator() -> Any:
     """The simulation registered under the entry-point group ``afa.simulators``."""
-    from importlib.metadata import entry_points
+    from afa import registry
 
-    found = {ep.name: ep for ep in entry_points(group="afa.simulators")}
+    found = registry.simulators()
     if not found:
         raise AfaError("no simulator is installed (entry-point group afa.simulators); "
                        "is afa installed? pip install -e .")
@@ -223,19 +244,20 @@ def _simulator() -> Any:
 
 
 async def _run_system(args: argparse.Namespace) -> int:
-    from contextlib import AsyncExitStack
-
     from afa.clock import VirtualClock, WallClock
-    from afa.errors import StartupError
+    from afa.errors import StartupError, TaskFailed
     from afa.system import System
 
     clock = VirtualClock() if args.fast else WallClock()
-    system = System.from_xml(args.config, strict=args.strict, clock=clock)
     simulation = None
+    options: dict[str, Any] = {"strict": args.strict, "clock": clock}
     if args.sim:
         simulation_cls = _simulator()
         world = args.world or simulation_cls.default_world()
         simulation = simulation_cls(world, clock, seed=args.seed, expose=args.expose)
+        options["devices"] = simulation.device_for
+    system = System.from_xml(args.config, **options)
+    if simulation is not None:
         simulation.attach(system)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -245,38 +267,66 @@ async def _run_system(args: argparse.Namespace) -> int:
         except (NotImplementedError, RuntimeError):  # pragma: no cover - non-Unix
             pass
     wall_start = time.monotonic()
-    clock_start = clock.now()
+    clock_start = clock.monotonic()
     try:
-        async with AsyncExitStack() as stack:
-            if simulation is not None:
-                await stack.enter_async_context(simulation)
-            await stack.enter_async_context(system)
+        async with system:
             for note in system.notes:
                 print(f"afa: {note}", file=sys.stderr)
-            tasks = [asyncio.ensure_future(stop.wait()),
-                     asyncio.ensure_future(system.run(args.duration)),
-                     asyncio.ensure_future(_progress(system, simulation, clock, clock_start,
-                                                     wall_start))]
-            await asyncio.wait(tasks[:2], return_when=asyncio.FIRST_COMPLETED)
-            for task in tasks:
-                task.cancel()
+            async with _simulating(simulation):
+                await _until_stopped(system, stop, args.duration,
+                                     _progress(system, simulation, clock, clock_start,
+                                               wall_start))
             summary = _summary(system, clock_start, wall_start)
             if simulation is not None:
                 summary.update(simulation.summary())
     except StartupError as exc:
+        await _close(simulation)
         print(f"afa run: the system did not start. {exc}".replace("\n", " "), file=sys.stderr)
         return EXIT_FAILURE
+    except TaskFailed as exc:
+        await _close(simulation)
+        print(f"afa run: stopped: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    await _close(simulation)
     _print_summary(summary)
     if args.summary is not None:
         args.summary.write_text(json.dumps(summary, indent=2))
     return EXIT_OK
 
 
+async def _close(simulation: Any) -> None:
+    if simulation is not None:
+        await simulation.aclose()
+
+
+def _simulating(simulation: Any) -> Any:
+    from contextlib import nullcontext
+
+    return nullcontext() if simulation is None else simulation.running()
+
+
+async def _until_stopped(system: Any, stop: asyncio.Event, duration: float | None,
+                         progress: Any) -> None:
+    """Run the system until ``duration``, a signal, or a failure (raised); print progress
+    meanwhile."""
+    from afa.tasks import Scope
+
+    async with Scope() as scope:
+        runner = scope.spawn(system.run(duration), "afa-run")
+        signalled = scope.spawn(stop.wait(), "afa-signal")
+        reporter = scope.spawn(progress, "afa-progress")
+        done, _ = await asyncio.wait([runner, signalled], return_when=asyncio.FIRST_COMPLETED)
+        for task in (runner, signalled, reporter):
+            task.cancel()
+        for task in done:
+            task.result()
+
+
 async def _progress(system: Any, simulation: Any, clock: Any, clock_start: float,
                     wall_start: float) -> None:
     """One progress line every 10 s of clock time (stderr)."""
     async for _ in clock.periodic(10.0, first=clock_start + 10.0):
-        elapsed = clock.now() - clock_start
+        elapsed = clock.monotonic() - clock_start
         wall = max(1e-9, time.monotonic() - wall_start)
         where = simulation.progress() if simulation is not None else ""
         print(f"t={elapsed:7.1f} s  x{elapsed / wall:6.1f} real time  {where}", file=sys.stderr)
@@ -284,7 +334,7 @@ async def _progress(system: Any, simulation: Any, clock: Any, clock_start: float
 
 def _summary(system: Any, clock_start: float, wall_start: float) -> dict[str, Any]:
     wall = time.monotonic() - wall_start
-    elapsed = system.clock.now() - clock_start
+    elapsed = system.clock.monotonic() - clock_start
     statistics = system.statistics()
     health = system.health()
     return {

@@ -1,15 +1,28 @@
 """Clocks: where components get time from.
 
 Components never read ``time.*`` or use ``asyncio.sleep`` for timing; they ask the clock
-the runtime injects. Two clocks share one interface:
+the runtime injects. A clock keeps two kinds of time apart (decision 0006):
 
-- :class:`WallClock`: real time, for the vehicle and for real-time simulation.
+- **stamps**, :meth:`Clock.now`: seconds since the Unix epoch (UTC), for the time
+  fields of events. On a vehicle the wall clock can step (GPS or NTP corrects it);
+- **intervals**, :meth:`Clock.monotonic`: a base that never steps, for every deadline,
+  timeout, watchdog and periodic timer (:meth:`call_at`, :meth:`sleep_until` and
+  :meth:`periodic`'s ``first`` take monotonic times). A wall-clock step fires nothing.
+
+Implementations:
+
+- :class:`WallClock`: real time, for the vehicle and real-time simulation.
 - :class:`VirtualClock`: simulated time for tests, ``--fast`` simulation and replay.
   Time stands still while anything can run; when every task is waiting, time jumps to
-  the earliest pending timer. Timers fire in (deadline, creation order), so two runs
-  with the same inputs produce the same event sequence, and an hour takes seconds.
-
-Times are float seconds since the Unix epoch (UTC); a virtual clock starts at ``start``.
+  the earliest pending timer. Timers fire in (deadline, creation order), so two runs with
+  the same inputs produce the same events, and an hour takes seconds. Optional *pacing*
+  caps it at a multiple of real time (``pace``; ``--realtime-factor``); it can be paused,
+  resumed, stepped and run for a given time (notebooks, a console, a replay). While real
+  I/O is pending (a socket, a serial port) waiting is not idleness: virtual time then runs
+  no faster than real time, so a device that answers in 50 ms is not timed out by a
+  5 s timeout that virtual time would otherwise reach at once.
+- :class:`ScaledClock`: a :class:`VirtualClock` paced at a speed factor (1.0 by
+  default) from the start: the replay clock.
 """
 
 from __future__ import annotations
@@ -20,12 +33,14 @@ import itertools
 import time
 import weakref
 from abc import ABC, abstractmethod
-from collections.abc import AsyncIterator, Callable, Sized
-from contextlib import asynccontextmanager
+from collections.abc import AsyncIterator, Callable, Iterator, Sized
+from contextlib import asynccontextmanager, contextmanager
 
 from afa.errors import ETimeOut
+from afa.tasks import loop_service
 
-__all__ = ["Clock", "WallClock", "VirtualClock", "TimerHandle", "Watchdog", "DEFAULT_EPOCH"]
+__all__ = ["Clock", "WallClock", "VirtualClock", "ScaledClock", "TimerHandle", "Watchdog",
+           "DEFAULT_EPOCH"]
 
 #: 2005-09-17 12:00:00 UTC, the date in the Raptor's geometry file name (050917...).
 DEFAULT_EPOCH = 1126958400.0
@@ -53,15 +68,30 @@ class Clock(ABC):
 
     @abstractmethod
     def now(self) -> float:
-        """Current time, seconds since the Unix epoch."""
+        """Time stamp: seconds since the Unix epoch (may step on a real vehicle)."""
+
+    @abstractmethod
+    def monotonic(self) -> float:
+        """Interval base: seconds from an arbitrary origin; never steps backwards or
+        jumps with the wall clock. Every deadline is on this base."""
 
     @abstractmethod
     def call_at(self, deadline: float, callback: Callable[[], object]) -> TimerHandle:
-        """Run ``callback()`` (a plain function) once ``now() >= deadline``."""
+        """Run ``callback()`` (a plain function) once ``monotonic() >= deadline``."""
+
+    def call_later(self, delay: float, callback: Callable[[], object]) -> TimerHandle:
+        """Run ``callback()`` after ``delay`` seconds."""
+        return self.call_at(self.monotonic() + max(0.0, delay), callback)
+
+    @contextmanager
+    def real_io(self) -> Iterator[None]:
+        """Mark a wait on real I/O (a socket, a serial port); see :class:`VirtualClock`.
+        Transports wrap their reads in it; on a real-time clock it does nothing."""
+        yield
 
     async def sleep_until(self, deadline: float) -> None:
-        """Suspend until ``now() >= deadline``."""
-        if deadline <= self.now():
+        """Suspend until ``monotonic() >= deadline``."""
+        if deadline <= self.monotonic():
             await asyncio.sleep(0)
             return
         future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
@@ -78,22 +108,23 @@ class Clock(ABC):
 
     async def sleep(self, seconds: float) -> None:
         """Suspend for ``seconds`` (zero or negative yields once)."""
-        await self.sleep_until(self.now() + max(0.0, seconds))
+        await self.sleep_until(self.monotonic() + max(0.0, seconds))
 
     async def periodic(self, period: float, *, first: float | None = None) -> AsyncIterator[int]:
         """Yield tick numbers every ``period`` seconds without drift.
 
-        Tick ``k`` is due at ``start + k * period``. A consumer that falls behind skips
-        the missed ticks (the number jumps) instead of receiving a burst.
+        Tick ``k`` is due at ``first + k * period`` (``first``: a monotonic time, default
+        now). A consumer that falls behind skips the missed ticks (the number jumps)
+        instead of receiving a burst.
         """
         if period <= 0:
             raise ValueError(f"period must be positive, got {period}")
-        start = self.now() if first is None else first
+        start = self.monotonic() if first is None else first
         tick = 0
         while True:
             await self.sleep_until(start + tick * period)
             yield tick
-            tick = max(tick + 1, int((self.now() - start) / period) + 1)
+            tick = max(tick + 1, int((self.monotonic() - start) / period) + 1)
 
     @asynccontextmanager
     async def timeout(self, seconds: float | None, what: str = "operation") -> AsyncIterator[None]:
@@ -145,14 +176,14 @@ class Watchdog:
     def __init__(self, clock: Clock, seconds: float, task: asyncio.Task[object]) -> None:
         self.clock = clock
         self.seconds = seconds
-        self.last = clock.now()
+        self.last = clock.monotonic()
         self.fired = False
         self._task = task
         self._handle: TimerHandle | None = clock.call_at(self.last + seconds, self._check)
 
     def feed(self) -> None:
         """A sign of life: the deadline is ``seconds`` from now."""
-        self.last = self.clock.now()
+        self.last = self.clock.monotonic()
 
     def stop(self) -> None:
         if self._handle is not None:
@@ -161,7 +192,7 @@ class Watchdog:
 
     def _check(self) -> None:
         due = self.last + self.seconds
-        if self.clock.now() < due:  # fed since the timer was set: wait for the rest
+        if self.clock.monotonic() < due:  # fed since the timer was set: wait for the rest
             self._handle = self.clock.call_at(due, self._check)
             return
         self._handle = None
@@ -170,39 +201,103 @@ class Watchdog:
 
 
 class WallClock(Clock):
-    """Real time: ``time.time()`` for stamps, the loop's monotonic timers for waiting."""
+    """Real time: stamps from ``time_source`` (``time.time``), intervals and timers from
+    the monotonic clock the event loop uses."""
+
+    def __init__(self, time_source: Callable[[], float] = time.time) -> None:
+        self._stamp = time_source
 
     def now(self) -> float:
-        return time.time()
+        return self._stamp()
+
+    def monotonic(self) -> float:
+        return time.monotonic()
 
     def call_at(self, deadline: float, callback: Callable[[], object]) -> TimerHandle:
         loop = asyncio.get_running_loop()
         handle = TimerHandle(deadline, callback)
-        handle._inner = loop.call_later(max(0.0, deadline - time.time()), callback)
+        handle._inner = loop.call_later(max(0.0, deadline - time.monotonic()), callback)
         return handle
 
 
 class VirtualClock(Clock):
     """Simulated time that advances only when every task is waiting.
 
-    While timers are pending the clock runs a small driver task: it yields to the loop
-    until nothing else is ready, then moves ``now`` to the earliest deadline and runs
-    every callback due at that instant, in the order they were scheduled. It needs the
-    standard asyncio event loop (it looks at the loop's ready queue to detect idleness).
+    While timers are pending a driver task (one per event loop) yields until nothing
+    else is ready, then moves time to the earliest deadline and runs every callback due
+    at that instant, in the order they were scheduled. It needs the standard asyncio
+    event loop (it looks at the loop's ready queue to detect idleness).
 
-    ``auto_advance=False`` freezes time; tests then move it with :meth:`advance`.
+    - ``start``: the stamp (:meth:`now`) at creation; :meth:`monotonic` starts at 0.
+    - ``pace``: None runs as fast as possible; a number caps virtual time at that
+      multiple of real time (a time stamp never runs ahead of the paced line; a run
+      that falls behind catches up without waiting).
+    - ``auto_advance=False`` starts paused: time moves only through :meth:`advance`,
+      :meth:`run_for` or :meth:`resume`.
+    - While real I/O is pending (:meth:`real_io`), virtual time runs at most at real
+      time, so waiting on the outside world is not mistaken for idleness.
     """
 
-    def __init__(self, start: float = DEFAULT_EPOCH, *, auto_advance: bool = True) -> None:
-        self._now = float(start)
+    def __init__(self, start: float = DEFAULT_EPOCH, *, auto_advance: bool = True,
+                 pace: float | None = None) -> None:
+        if pace is not None and not pace > 0:
+            raise ValueError(f"pace must be positive or None, got {pace}")
+        self._start = float(start)
+        self._t = 0.0
+        self._wall_offset = 0.0
         self._timers: list[tuple[float, int, TimerHandle]] = []
         self._order = itertools.count()
         self._settlers: list[asyncio.Future[None]] = []
         self._driver: _LoopDriver | None = None  # of the loop last used
+        self._pace = pace
+        self._io_pending = 0
+        self._anchor: tuple[float, float, float] | None = None  # (virtual, real, pace)
         self.auto_advance = auto_advance
 
+    # -- time ---------------------------------------------------------------------------
     def now(self) -> float:
-        return self._now
+        return self._start + self._t + self._wall_offset
+
+    def monotonic(self) -> float:
+        return self._t
+
+    def step_wall(self, seconds: float) -> None:
+        """Step the stamps by ``seconds`` (as GPS or NTP correcting a wall clock would);
+        intervals, timers and watchdogs are unaffected."""
+        self._wall_offset += seconds
+
+    @property
+    def pace(self) -> float | None:
+        """The real-time factor (None: as fast as possible)."""
+        return self._pace
+
+    @pace.setter
+    def pace(self, value: float | None) -> None:
+        if value is not None and not value > 0:
+            raise ValueError(f"pace must be positive or None, got {value}")
+        self._pace = value
+        self._anchor = None
+        self._poke()
+
+    @property
+    def paused(self) -> bool:
+        return not self.auto_advance
+
+    def pause(self) -> None:
+        """Freeze time: timers stay pending until :meth:`resume`, :meth:`advance` or
+        :meth:`run_for`."""
+        self.auto_advance = False
+
+    def resume(self) -> None:
+        """Let time advance by itself again (paced from this moment)."""
+        self.auto_advance = True
+        self._anchor = None
+        if self._driver is not None or self._timers:
+            try:
+                self._ensure_driver()
+            except RuntimeError:  # no running loop: the next call_at starts the driver
+                return
+        self._poke()
 
     @property
     def pending(self) -> int:
@@ -210,23 +305,38 @@ class VirtualClock(Clock):
         return sum(1 for _, _, h in self._timers if not h.cancelled)
 
     def call_at(self, deadline: float, callback: Callable[[], object]) -> TimerHandle:
-        handle = TimerHandle(max(deadline, self._now), callback)
+        handle = TimerHandle(max(deadline, self._t), callback)
+        earliest = self._timers[0][0] if self._timers else None
         heapq.heappush(self._timers, (handle.deadline, next(self._order), handle))
         if self.auto_advance:
             self._ensure_driver()
+            if earliest is None or handle.deadline < earliest:
+                self._poke()
         return handle
 
+    @contextmanager
+    def real_io(self) -> Iterator[None]:
+        self._io_pending += 1
+        try:
+            yield
+        finally:
+            self._io_pending -= 1
+            self._poke()
+
+    # -- driving by hand ------------------------------------------------------------------
     async def settle(self) -> None:
         """Return once no other task or callback is ready to run (time does not move)."""
         future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         self._settlers.append(future)
         self._ensure_driver()
+        self._poke()
         await future
 
     async def advance(self, seconds: float) -> None:
         """Move time forward by ``seconds``, running due timers in order and settling
-        between instants; returns settled at ``now + seconds``."""
-        target = self._now + seconds
+        between instants; returns settled at ``monotonic() + seconds``. Works paused or
+        running (when running, pacing applies)."""
+        target = self._t + seconds
         if self.auto_advance:
             await self.sleep_until(target)
         else:
@@ -234,9 +344,16 @@ class VirtualClock(Clock):
             while (deadline := self._next_deadline()) is not None and deadline <= target:
                 self._fire_next()
                 await self.settle()
-            self._now = max(self._now, target)
+            self._t = max(self._t, target)
         await self.settle()
 
+    async def run_for(self, seconds: float) -> None:
+        """Run for ``seconds`` of virtual time and leave the clock as it was (paused
+        clocks stay paused between calls: a notebook cell can run a simulation for ten
+        seconds and the next cell finds it where it stopped)."""
+        await self.advance(seconds)
+
+    # -- internals ----------------------------------------------------------------------
     def _next_deadline(self) -> float | None:
         while self._timers and self._timers[0][2].cancelled:
             heapq.heappop(self._timers)
@@ -246,12 +363,29 @@ class VirtualClock(Clock):
         deadline = self._next_deadline()
         if deadline is None:
             return
-        self._now = max(self._now, deadline)
+        self._t = max(self._t, deadline)
         while self._timers and self._timers[0][0] == deadline:
             _, _, handle = heapq.heappop(self._timers)
             if not handle.cancelled:
                 handle.cancelled = True  # a handle runs at most once
                 handle.callback()
+
+    def _effective_pace(self) -> float | None:
+        if self._io_pending:
+            return 1.0 if self._pace is None else min(self._pace, 1.0)
+        return self._pace
+
+    def _real_wait(self, deadline: float) -> float:
+        """Real seconds to wait before virtual time may reach ``deadline`` (0: now)."""
+        pace = self._effective_pace()
+        if pace is None:
+            self._anchor = None
+            return 0.0
+        real = time.monotonic()
+        anchor = self._anchor
+        if anchor is None or anchor[2] != pace:
+            anchor = self._anchor = (self._t, real, pace)
+        return anchor[1] + (deadline - anchor[0]) / pace - real
 
     def _ensure_driver(self) -> None:
         loop = asyncio.get_running_loop()
@@ -259,6 +393,10 @@ class VirtualClock(Clock):
         if driver is None or driver.loop is not loop:
             driver = self._driver = _LoopDriver.of(loop)
         driver.serve(self)
+
+    def _poke(self) -> None:
+        if self._driver is not None:
+            self._driver.poke()
 
     def _has_work(self) -> bool:
         return bool(self._settlers) or (self.auto_advance and self._next_deadline() is not None)
@@ -271,13 +409,25 @@ class VirtualClock(Clock):
         return bool(settlers)
 
 
+class ScaledClock(VirtualClock):
+    """Virtual time paced at ``speed`` times real time (1.0: real time): the replay
+    clock. ``speed`` can change while running (``clock.pace = 4.0``; ``None`` = as fast
+    as possible); :meth:`pause`, :meth:`resume`, :meth:`advance` (a step) as for any
+    :class:`VirtualClock`."""
+
+    def __init__(self, start: float = DEFAULT_EPOCH, *, speed: float | None = 1.0,
+                 paused: bool = False) -> None:
+        super().__init__(start, auto_advance=not paused, pace=speed)
+
+
 class _LoopDriver:
     """The one task per event loop that moves virtual time.
 
     It yields until the loop is idle, then wakes ``settle()`` callers, or else moves one
-    clock (round robin, if several virtual clocks share the loop) to its next timer. A
-    single driver per loop matters: two spinning drivers would each keep the other's
-    loop busy and time would never move.
+    clock (round robin, if several virtual clocks share the loop) to its next timer, or,
+    when every clock is paced, waits in real time until the earliest may move (a new
+    timer, a resume or finished I/O wakes it early). A single driver per loop matters: two
+    spinning drivers would each keep the other's loop busy and time would never move.
     """
 
     _instances: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _LoopDriver] = (
@@ -287,6 +437,7 @@ class _LoopDriver:
         self._loop = weakref.ref(loop)
         self.clocks: list[VirtualClock] = []
         self.task: asyncio.Task[None] | None = None
+        self._wake: asyncio.Future[None] | None = None
 
     @property
     def loop(self) -> asyncio.AbstractEventLoop | None:
@@ -303,11 +454,17 @@ class _LoopDriver:
         if clock not in self.clocks:
             self.clocks.append(clock)
         if self.task is None or self.task.done():
-            loop = asyncio.get_running_loop()
-            self.task = loop.create_task(self._run(), name="afa-virtual-clock")
+            # the clock's own task, outside any System: it must outlive them all
+            self.task = loop_service(self._run(), "afa-virtual-clock")
+
+    def poke(self) -> None:
+        wake = self._wake
+        if wake is not None and not wake.done():
+            wake.set_result(None)
 
     async def _run(self) -> None:
         ready = _ready_queue()
+        loop = asyncio.get_running_loop()
         while True:
             self.clocks = [c for c in self.clocks if c._has_work()]
             if not self.clocks:
@@ -317,11 +474,30 @@ class _LoopDriver:
                 continue
             if any([c._wake_settlers() for c in self.clocks]):
                 continue
+            wait: float | None = None
             for index, clock in enumerate(self.clocks):
-                if clock.auto_advance and clock._next_deadline() is not None:
+                deadline = clock._next_deadline() if clock.auto_advance else None
+                if deadline is None:
+                    continue
+                real = clock._real_wait(deadline)
+                if real <= 0.0:
                     clock._fire_next()
                     self.clocks.append(self.clocks.pop(index))
+                    wait = None
                     break
+                wait = real if wait is None else min(wait, real)
+            else:
+                if wait is not None:
+                    await self._sleep_real(loop, wait)
+
+    async def _sleep_real(self, loop: asyncio.AbstractEventLoop, seconds: float) -> None:
+        self._wake = wake = loop.create_future()
+        timer = loop.call_later(seconds, self.poke)
+        try:
+            await wake
+        finally:
+            timer.cancel()
+            self._wake = None
 
 
 def _ready_queue() -> Sized:

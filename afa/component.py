@@ -1,26 +1,41 @@
 """Components: Miro's three design patterns as small async base classes.
 
-A component fills a few hooks; the base owns lifecycle, logging, error routing, names
-and the get/getWait machinery:
+A component declares its **ports** in its constructor, from its parameters, so the data
+flow of a configuration is known before anything runs (:mod:`afa.ports`)::
 
-- :meth:`Component.setup` (each (re)start): make publishers, subscribe, serve
-  interfaces. Keep it local and quick: do not wait for other components here.
-- :meth:`Component.run` (after setup): the main body. It may return at once; the
-  component then lives as long as the tasks it spawned (subscription handlers, reactor,
-  timers). Resolve other components' names here (``await self.resolve(...)``).
+    class Counter(SubscribePublishServer[CounterParameters]):
+        def __init__(self, name, parameters=None):
+            super().__init__(name, parameters)
+            self.counts = self.publishes("Count", Count)             # Output[Count]
+            self.subscribes("Tick", Tick, self.on_tick)               # handler per event
+            self.serves(CounterInterface, "Counter")                  # bound while running
+            self.platform = self.uses(Platform, "ModelService")       # a proxy by name
+
+and fills a few hooks; the base owns lifecycle, logging, error routing, names and the
+ports:
+
+- :meth:`Component.setup` (each (re)start, before any event or poll arrives): make
+  slots, open files, reset state. Keep it quick; do not wait for other components.
+- :meth:`Component.run` (after setup, with subscriptions flowing and names bound): the
+  main body. It may return at once: the component stays up until it is stopped.
 - :meth:`Component.teardown` (every stop or failure): release what setup acquired.
 
-Any exception in setup, run, a subscription handler or a spawned task fails the
-component as a unit: it is logged with the component's name, its names are unbound,
-its subscriptions closed, and the supervisor (:mod:`afa.system`) restarts it with
-backoff per its :class:`RestartPolicy`. The other components keep running.
+Any exception in setup, run, a subscription handler (a body of the wrong type
+included) or a spawned task fails the component as a unit: it is logged with the
+component's name, its names are unbound, its subscriptions closed, and the supervisor
+(:mod:`afa.system`) restarts it with backoff per its :class:`RestartPolicy`. A handler
+that ends any other way than returning (even with a ``CancelledError`` of its own) fails
+it too. The other components keep running.
+
+Components are generic in their parameter model: ``class Gps(PublishServerReactor[
+GpsParameters, GpsMessage])`` makes ``self.parameters`` a ``GpsParameters``.
 
 The three patterns (seed §2.2.1):
 
 - :class:`SubscribePublishServer` (SPS): receives events, processes, publishes, serves.
 - :class:`PublishServerReactor` (PSR): a device driver; the reactor (a byte stream and
   a codec, :mod:`afa.reactor`) stays apart from the server part that publishes events
-  and answers polls.
+  and answers polls. The base starts the reactor after setup.
 - :class:`Client`: resolves a name and polls a server through its typed interface.
 """
 
@@ -28,7 +43,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Awaitable, Callable, Coroutine
+import typing
+from collections.abc import Coroutine
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -38,12 +54,23 @@ from afa.clock import Clock
 from afa.codec import StreamDecoder
 from afa.config.parameters import Parameters
 from afa.errors import ComponentError, EDevIO
-from afa.events import Event, EventChannel, Overflow, Publisher, Subscription
+from afa.events import EventChannel, Overflow
 from afa.naming import NameRegistry, join_name
-from afa.polling import LatestSlot, Servant, proxy_for
+from afa.polling import (
+    LatestSlot,
+    LocalInvoker,
+    PollLayer,
+    Proxy,
+    Servant,
+    check_servant,
+    proxy_for,
+    proxy_name,
+)
+from afa.ports import Handler, Input, Output, PortInfo, Served, Used
 from afa.reactor import Backoff, Reactor
+from afa.tasks import Scope, first_error
 from afa.transport import ByteStream, DeviceOpener, DeviceSpec
-from idl._base import Interface
+from idl._base import IDLModel, Interface
 
 __all__ = [
     "State", "Context", "Component", "SubscribePublishServer", "PublishServerReactor",
@@ -53,6 +80,7 @@ __all__ = [
 InterfaceT = TypeVar("InterfaceT", bound=Interface)
 M = TypeVar("M")
 P = TypeVar("P", bound=Parameters)
+T = TypeVar("T", bound=IDLModel)
 
 
 class State(StrEnum):
@@ -94,6 +122,7 @@ class Context:
     clock: Clock
     devices: DeviceOpener = field(default_factory=DeviceOpener)
     base_dir: Path = field(default_factory=Path.cwd)
+    polls: PollLayer | None = None
 
 
 @dataclass(frozen=True)
@@ -107,55 +136,122 @@ class Health:
     last_error: str | None
 
 
-class Component:
-    """Base of every component (see the module docstring for the hooks)."""
+class _Forever:
+    """Awaited after ``run`` returns: a component lives until it is stopped."""
 
-    #: The component's parameter model; ``parameters`` is an instance of it.
-    Parameters: ClassVar[type[Parameters] | None] = None
+    def __await__(self) -> typing.Generator[Any, None, None]:
+        return asyncio.get_running_loop().create_future().__await__()
+
+
+class Component(Generic[P]):
+    """Base of every component (see the module docstring for ports and hooks)."""
+
+    #: The component's parameter model (derived from ``Component[Model]``).
+    parameters_type: ClassVar[type[Parameters] | None] = None
     #: Per-class restart policy; None uses the system's.
     restart_policy: ClassVar[RestartPolicy | None] = None
 
-    def __init__(self, name: str, parameters: Parameters | None = None) -> None:
-        if parameters is None and self.Parameters is not None:
-            parameters = self.Parameters()
-        if self.Parameters is not None and not isinstance(parameters, self.Parameters):
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "parameters_type" in cls.__dict__:
+            return
+        for base in getattr(cls, "__orig_bases__", ()):
+            origin = typing.get_origin(base)
+            if isinstance(origin, type) and issubclass(origin, Component):
+                args = typing.get_args(base)
+                if args and isinstance(args[0], type) and issubclass(args[0], Parameters):
+                    cls.parameters_type = args[0]
+                    return
+
+    def __init__(self, name: str, parameters: P | None = None) -> None:
+        expected = self.parameters_type
+        if parameters is None and expected is not None:
+            parameters = expected()  # type: ignore[assignment]
+        if expected is not None and not isinstance(parameters, expected):
             raise ComponentError(
-                f"{name}: expected {self.Parameters.__name__}, got {type(parameters).__name__}")
+                f"{name}: expected {expected.__name__}, got {type(parameters).__name__}")
         self.name = name
-        self.parameters = parameters
+        self.parameters: P = parameters  # type: ignore[assignment]
+        self.type_name = type(self).__name__
         self.state = State.CREATED
         self.log = logging.getLogger(f"afa.component.{name}")
         self.restarts = 0
         self.failures = 0
         self.last_error: BaseException | None = None
         self._context: Context | None = None
-        self._tasks: asyncio.TaskGroup | None = None
-        self._subscriptions: list[Subscription] = []
+        self._scope: Scope | None = None
+        self._outputs: list[Output[Any]] = []
+        self._inputs: list[Input] = []
+        self._served: list[Served] = []
+        self._used: list[Used] = []
         self._healthy = True
         self._health_detail = ""
         self._state_changed = asyncio.Event()
 
-    # -- hooks -----------------------------------------------------------------------
+    # -- ports (declare in __init__) ---------------------------------------------------
+    def publishes(self, event_name: str, body_type: type[T], *,
+                  enabled: bool = True) -> Output[T]:
+        """Declare a publication of ``<Robot>/<event_name>`` with ``body_type`` bodies.
+        ``enabled=False`` keeps it in the catalog but publishes nothing (``Notify``)."""
+        port = Output(self.name, event_name, body_type, enabled)
+        self._outputs.append(port)
+        return port
+
+    def subscribes(self, event_name: str, body_types: type[IDLModel] | tuple[type[IDLModel], ...],
+                   handler: Handler, *, domain: str | None = None, maxsize: int = 16,
+                   policy: Overflow = Overflow.DROP_OLDEST) -> Input:
+        """Declare a subscription: ``handler(event)`` (sync or async) runs in a task of
+        this component for every event whose body is one of ``body_types``. ``*``,
+        ``?`` and ``[...]`` are wildcards in ``event_name``."""
+        types = body_types if isinstance(body_types, tuple) else (body_types,)
+        port = Input(self.name, event_name, types, handler, domain, maxsize, policy)
+        self._inputs.append(port)
+        return port
+
+    def serves(self, interface: type[Interface], name: str | None = None,
+               impl: object | None = None) -> str:
+        """Declare that ``<Robot>/<name>`` (default: the component's name) serves
+        ``interface`` with this component (or ``impl``) while the component runs.
+        Signatures are checked now. Returns the short name."""
+        target = self if impl is None else impl
+        check_servant(interface, target)
+        served = Served(self.name, interface, name or self.name, target)
+        self._served.append(served)
+        return served.name
+
+    def uses(self, interface: type[InterfaceT], name: str) -> InterfaceT:
+        """Declare that this component polls ``interface`` at ``<Robot>/<name>``; returns
+        the proxy. It reaches whatever serves the name at each call (NameNotFound while
+        nothing does); :meth:`bound` waits for it."""
+        proxy = _unattached_proxy(interface, name)
+        self._used.append(Used(self.name, interface, name, proxy))  # type: ignore[arg-type]
+        return proxy
+
+    def ports(self) -> list[PortInfo]:
+        """This component's catalog entries."""
+        return ([p.info() for p in self._outputs] + [p.info() for p in self._inputs]
+                + [p.info() for p in self._served] + [p.info() for p in self._used])
+
+    async def bound(self, proxy: object, timeout: float | None = None) -> None:
+        """Wait until the name a used proxy calls is bound (ETimeOut after ``timeout``)."""
+        await self.context.registry.wait_resolve(join_name(self.robot, proxy_name(proxy)),
+                                                 timeout)
+
+    # -- hooks -------------------------------------------------------------------------
     async def setup(self) -> None:
-        """Create publishers, subscriptions and servants. Called at every (re)start."""
+        """Prepare state for a (re)start; no event or poll arrives before it returns."""
 
     async def run(self) -> None:
-        """The main body; may return at once (spawned tasks keep the component alive)."""
+        """The main body; may return at once (the component stays up until stopped)."""
 
     async def teardown(self) -> None:
         """Release resources acquired in setup. Called at every stop or failure."""
 
     def statistics(self) -> dict[str, Any]:
         """Counters for health displays and run summaries; extend in subclasses."""
-        stats: dict[str, Any] = {}
-        for subscription in self._subscriptions:
-            counters = subscription.statistics()
-            stats[f"{subscription.domain}/{subscription.type}"] = {
-                "delivered": counters.delivered, "dropped": counters.dropped,
-                "high_water": counters.high_water}
-        return stats
+        return {port.name: port.statistics() for port in self._inputs}
 
-    # -- context ---------------------------------------------------------------------
+    # -- context -----------------------------------------------------------------------
     @property
     def context(self) -> Context:
         if self._context is None:
@@ -170,48 +266,6 @@ class Component:
     def robot(self) -> str:
         return self.context.robot
 
-    # -- helpers for setup/run ---------------------------------------------------------
-    def publisher(self, event_name: str) -> Publisher:
-        """A publisher of ``<Robot>/<event_name>`` events."""
-        return self.context.channel.offer(self.robot, event_name)
-
-    def subscribe(self, event_name: str, handler: Callable[[Event], Awaitable[None] | None],
-                  *, domain: str | None = None, maxsize: int = 16,
-                  policy: Overflow = Overflow.DROP_OLDEST) -> Subscription:
-        """Deliver matching events to ``handler`` (sync or async) in a task of this
-        component; an exception in the handler fails the component."""
-        subscription = self.context.channel.subscribe(
-            self.robot if domain is None else domain, event_name, maxsize=maxsize, policy=policy)
-        self._subscriptions.append(subscription)
-
-        async def deliver() -> None:
-            async for event in subscription:
-                result = handler(event)
-                if result is not None:
-                    await result
-
-        self.spawn(deliver(), f"{self.name}:{event_name}")
-        return subscription
-
-    def serve(self, interface: type[Interface], name: str | None = None,
-              impl: object | None = None) -> str:
-        """Bind ``<Robot>/<name>`` to this component (or ``impl``) serving ``interface``.
-
-        The name is unbound when the component stops. Returns the full name.
-        """
-        full = join_name(self.robot, name or self.name)
-        servant = Servant(interface, self if impl is None else impl, name=full, logger=self.log)
-        self.context.registry.rebind(full, servant, owner=self)
-        return full
-
-    async def resolve(self, interface: type[InterfaceT], name: str, *,
-                      timeout: float | None = None,
-                      call_timeout: float | None = None) -> InterfaceT:
-        """Wait until ``name`` is bound (``timeout`` None: forever) and return a proxy."""
-        full = join_name(self.robot, name)
-        servant = await self.context.registry.wait_resolve(full, timeout)
-        return proxy_for(interface, servant, self.clock, timeout=call_timeout, name=full)
-
     def slot(self, what: str) -> LatestSlot[Any]:
         """A latest-value slot on this component's clock (for get/getWait polls)."""
         return LatestSlot(self.clock, f"{what} from {self.name}")
@@ -219,17 +273,18 @@ class Component:
     def spawn(self, coroutine: Coroutine[Any, Any, Any],
               name: str | None = None) -> asyncio.Task[Any]:
         """Run ``coroutine`` as part of this component (failing with it)."""
-        if self._tasks is None:
+        if self._scope is None:
             coroutine.close()
             raise ComponentError(f"{self.name}: spawn() is only possible while starting or running")
-        return self._tasks.create_task(coroutine, name=name or self.name)
+        return self._scope.spawn(coroutine, name or self.name)
 
     def set_health(self, healthy: bool, detail: str = "") -> None:
         """Report the component (un)healthy, e.g. while its device is lost."""
         if healthy != self._healthy or detail != self._health_detail:
             self._healthy, self._health_detail = healthy, detail
             log = self.log.info if healthy else self.log.warning
-            log("%s", f"healthy {detail}".strip() if healthy else f"unhealthy: {detail}")
+            log("%s", f"{self.name}: healthy {detail}".strip() if healthy
+                else f"{self.name}: unhealthy: {detail}")
 
     def health(self) -> Health:
         healthy = self._healthy and self.state is State.RUNNING
@@ -239,6 +294,8 @@ class Component:
     # -- lifecycle (driven by the supervisor) ------------------------------------------
     def _attach(self, context: Context) -> None:
         self._context = context
+        for used in self._used:
+            _attach_proxy(used.proxy, context)
 
     def _set_state(self, state: State) -> None:
         self.state = state
@@ -249,27 +306,65 @@ class Component:
         await self._state_changed.wait()
 
     async def _run_once(self) -> None:
-        """One life: setup, run, until the tasks end; raises what failed it."""
+        """One life: setup, ports open, run, then up until stopped; raises what failed
+        it."""
         self._set_state(State.STARTING)
         self._healthy, self._health_detail = True, ""
+        context = self.context
         try:
-            async with asyncio.TaskGroup() as tasks:
-                self._tasks = tasks
+            async with Scope() as scope:
+                self._scope = scope
+                for output in self._outputs:
+                    output._publisher = context.channel.offer(self.robot, output.name)
                 await self.setup()
+                for port in self._inputs:
+                    port.subscription = context.channel.subscribe(
+                        self.robot if port.domain is None else port.domain, port.name,
+                        maxsize=port.maxsize, policy=port.policy)
+                    scope.spawn(self._deliver(port), f"{self.name}:{port.name}")
+                for served in self._served:
+                    context.registry.rebind(
+                        join_name(self.robot, served.name),
+                        Servant(served.interface, served.impl, name=join_name(
+                            self.robot, served.name), logger=self.log), owner=self)
+                self._started()
                 self._set_state(State.RUNNING)
                 await self.run()
+                await _Forever()
         except BaseExceptionGroup as group:
-            raise _first_error(group) from None
+            raise first_error(group) from None
         finally:
-            self._tasks = None
+            self._scope = None
+            for output in self._outputs:
+                output._publisher = None
             if self.state is not State.FAILED:
                 self._set_state(State.STOPPING)
             await self._release()
 
+    def _started(self) -> None:
+        """Called after setup with the ports open (the PSR base starts its reactor)."""
+
+    async def _deliver(self, port: Input) -> None:
+        subscription = port.subscription
+        assert subscription is not None
+        handler = port.handler
+        async for event in subscription:
+            port.check(event)
+            try:
+                result = handler(event)
+                if result is not None:
+                    await result
+            except asyncio.CancelledError:
+                task = asyncio.current_task()
+                if task is not None and task.cancelling():
+                    raise  # the component is stopping
+                raise ComponentError(f"{self.name}: the handler of {port.name!r} raised "
+                                     "CancelledError without being cancelled") from None
+
     async def _release(self) -> None:
-        for subscription in self._subscriptions:
-            subscription.close()
-        self._subscriptions.clear()
+        for port in self._inputs:
+            if port.subscription is not None:
+                port.subscription.close()
         if self._context is not None:
             self._context.registry.unbind_owner(self)
         try:
@@ -288,38 +383,52 @@ class Component:
         return f"<{type(self).__name__} {self.name} {self.state.value}>"
 
 
-def _first_error(group: BaseExceptionGroup) -> BaseException:
-    """The exception that failed a component, unwrapped from TaskGroup's group."""
-    for exc in group.exceptions:
-        if isinstance(exc, BaseExceptionGroup):
-            return _first_error(exc)
-        if not isinstance(exc, asyncio.CancelledError):
-            return exc
-    return group
+def _unattached_proxy(interface: type[InterfaceT], name: str) -> InterfaceT:
+    """A proxy whose calls fail until its component is attached to a system."""
+
+    class _Detached:
+        def __init__(self) -> None:
+            self.interface: type[Interface] = interface
+            self.name = name
+
+        async def invoke(self, method: str, arguments: dict[str, Any]) -> Any:
+            raise ComponentError(f"{name}.{method}: the calling component is not attached "
+                                 "to a System")
+
+    return proxy_for(interface, _Detached())
 
 
-class SubscribePublishServer(Component):
+def _attach_proxy(proxy: Proxy, context: Context) -> None:
+    """Point a used port's proxy at the system's registry and middleware."""
+    interface = type(proxy).interface  # type: ignore[attr-defined]
+    fresh = proxy_for(interface, LocalInvoker(context.registry, join_name(
+        context.robot, proxy._invoker.name), interface),
+        middleware=context.polls.middleware if context.polls is not None else ())
+    proxy._invoker, proxy._chain = fresh._invoker, fresh._chain  # type: ignore[attr-defined]
+
+
+class SubscribePublishServer(Component[P]):
     """SPS: receives events, processes them, publishes events and answers polls."""
 
 
-class Client(Component):
-    """Client: resolves names and polls servers (``await self.resolve(Interface, name)``)."""
+class Client(Component[P]):
+    """Client: polls servers through typed proxies (``self.uses(Interface, name)``)."""
 
 
-class PublishServerReactor(Component, Generic[M]):
+class PublishServerReactor(Component[P], Generic[P, M]):
     """PSR: a device component. The reactor owns the byte stream and the decoder and
     reconnects with backoff; the server part (this class) publishes and answers polls.
 
     Subclasses implement :meth:`device` (what to open), :meth:`decoder` (a fresh
     decoder), and :meth:`handle` (one decoded message); optionally :meth:`on_connect`
     (e.g. send configuration commands). ``stale_after`` seconds without a message
-    count as a lost device.
+    count as a lost device. The base starts the reactor once setup has returned.
     """
 
     backoff: ClassVar[Backoff] = Backoff()
-    stale_after: ClassVar[float | None] = None
+    stale_after: float | None = None
 
-    def __init__(self, name: str, parameters: Parameters | None = None) -> None:
+    def __init__(self, name: str, parameters: P | None = None) -> None:
         super().__init__(name, parameters)
         self.reactor: Reactor[M] | None = None
 
@@ -342,11 +451,12 @@ class PublishServerReactor(Component, Generic[M]):
             raise EDevIO(f"{self.name}: not started")
         await self.reactor.send(data)
 
-    async def setup(self) -> None:
+    def _started(self) -> None:
         spec = self.device()
+        devices = self.context.devices
 
         async def open_stream() -> ByteStream:
-            return await self.context.devices.open(self.name, spec)
+            return await devices.open(self.name, spec)  # type: ignore[no-any-return]
 
         self.reactor = Reactor(self.name, open_stream, self.decoder(), self.handle, self.clock,
                                backoff=self.backoff, stale_after=self.stale_after,

@@ -15,8 +15,12 @@ builtin it behaves like, so callers can catch either::
     ├── EOutOfBounds           (ValueError)    Miro's EOutOfBounds: an argument out of range
     ├── ChannelClosed          (RuntimeError)  a subscription or channel was closed
     ├── ComponentError         (RuntimeError)  a component could not be built or run
-    └── StartupError           (RuntimeError)  one or more components failed to start;
-                                               ``failures`` maps component name -> error
+    ├── StartupError           (RuntimeError)  one or more components failed to start;
+    │                                          ``failures`` maps component name -> error
+    ├── TaskFailed             (RuntimeError)  a task of the system (a fake device, the
+    │                                          simulation, a bridge) failed; ``owner``
+    └── RealDeviceForbidden    (PermissionError) a real device was opened where real
+                                               devices are forbidden (tests)
 
 Foreign exceptions (pyserial, lxml, pydantic, OSError from sockets) are translated at
 the boundary where they enter afa, with ``raise ... from exc`` so the cause is kept.
@@ -91,3 +95,18 @@ class StartupError(AfaError, RuntimeError):
         lines = [f"{len(self.failures)} component(s) failed to start:"]
         lines += [f"  {name}: {type(exc).__name__}: {exc}" for name, exc in self.failures.items()]
         super().__init__("\n".join(lines))
+
+
+class TaskFailed(AfaError, RuntimeError):
+    """A task owned by the system, not by a component, failed (a fake device, the
+    simulation's physics, a bridge); ``owner`` names it and ``__cause__`` is the error."""
+
+    def __init__(self, owner: str, error: BaseException) -> None:
+        self.owner = owner
+        self.error = error
+        super().__init__(f"{owner} failed: {type(error).__name__}: {error}")
+
+
+class RealDeviceForbidden(AfaError, PermissionError):
+    """A real serial port or socket was to be opened where real devices are forbidden
+    (``System(real_devices=False)`` or ``AFA_FORBID_REAL_DEVICES=1``, as in afa's tests)."""

@@ -13,56 +13,81 @@ number and one IDL body. Suppliers publish anonymously; every subscription whose
 - :meth:`EventChannel.offer` returns a :class:`Publisher` that caches its matching
   subscriptions, so a supplier can ask ``publisher.subscribed`` before building an
   expensive event and publish with no pattern matching on the hot path.
-- Events serialise losslessly (:meth:`Event.to_json`), for logs and the network.
+- An event names its *origin* (the publishing component; ``process/component`` once
+  several processes share a channel through a bridge), so a bridge never echoes an
+  event back where it came from and a log says who said what.
+- Events serialise losslessly through the wire codec (:meth:`Event.encode`), for logs,
+  the network and the console.
+- Anything that watches the whole channel (a digest, a recorder, the console, a bridge)
+  is an *observer*: a subscription to ``*`` with its own bounded buffer, so a slow or
+  failing observer never slows or fails a publisher, and what it drops is counted
+  (:meth:`EventChannel.observe`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
-from collections import deque
-from collections.abc import AsyncIterator, Callable
+import struct
+from collections import Counter, deque
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from enum import StrEnum
 from fnmatch import fnmatchcase
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from afa.clock import Clock, WallClock
 from afa.errors import ChannelClosed
-from idl._base import IDLModel, idl_types
+from idl import wire
+from idl._base import IDLModel
 
 __all__ = ["Event", "EventChannel", "Subscription", "Publisher", "Overflow",
            "SubscriptionStatistics"]
 
 
+_ENVELOPE = struct.Struct("<4sdQHHH")
+_EVENT_MAGIC = b"AFE1"
+
+
 class Event(NamedTuple):
-    """One structured event (immutable). ``body`` is an immutable IDL model."""
+    """One structured event (immutable). ``body`` is an immutable IDL model; ``origin``
+    names the component (and process) that published it."""
 
     domain: str
     type: str
     time: float
     seq: int
     body: IDLModel
+    origin: str = ""
 
-    def to_json(self) -> bytes:
-        """Serialise losslessly; the body's IDL type name travels with it."""
-        header = {
-            "domain": self.domain,
-            "type": self.type,
-            "time": self.time,
-            "seq": self.seq,
-            "body_type": type(self.body).__name__,
-        }
-        return b'{"header":%s,"body":%s}' % (json.dumps(header).encode(), self.body.to_json())
+    def encode(self) -> bytes:
+        """The event as bytes: a small envelope (magic ``AFE1``, time f64, seq u64, the
+        lengths of domain, type and origin), those three names in UTF-8, then the body's
+        wire frame (:mod:`idl.wire`)."""
+        names = [self.domain.encode(), self.type.encode(), self.origin.encode()]
+        head = _ENVELOPE.pack(_EVENT_MAGIC, self.time, self.seq, *map(len, names))
+        return b"".join([head, *names, *wire.encode_parts(self.body)])
 
     @classmethod
-    def from_json(cls, data: bytes | str) -> Event:
-        """Inverse of :meth:`to_json`; the body type must be a known IDL type."""
-        raw = json.loads(data)
-        header = raw["header"]
-        body_cls = idl_types()[header["body_type"]]
-        return cls(header["domain"], header["type"], header["time"], header["seq"],
-                   body_cls.model_validate(raw["body"]))
+    def decode(cls, data: bytes | bytearray | memoryview) -> Event:
+        """Inverse of :meth:`encode`. Raises :class:`idl.wire.WireError` for anything
+        that is not a valid event of a known IDL type."""
+        view = memoryview(data)
+        try:
+            magic, time, seq, n_domain, n_type, n_origin = _ENVELOPE.unpack_from(view)
+        except struct.error:
+            raise wire.WireError("truncated event envelope") from None
+        if magic != _EVENT_MAGIC:
+            raise wire.WireError(f"not an afa event (magic {magic!r})")
+        offset = _ENVELOPE.size
+        try:
+            names: list[str] = []
+            for n in (n_domain, n_type, n_origin):
+                names.append(bytes(view[offset:offset + n]).decode())
+                offset += n
+        except UnicodeDecodeError as exc:
+            raise wire.WireError(f"event names are not UTF-8: {exc}") from None
+        body: IDLModel = wire.decode(view[offset:])  # arrays: views of ``data`` (bytes)
+        return cls(names[0], names[1], time, seq, body, names[2])
 
 
 class Overflow(StrEnum):
@@ -206,13 +231,13 @@ class Publisher:
             self._version = self._channel._version
         return self._targets
 
-    def publish(self, body: IDLModel) -> Event:
+    def publish(self, body: IDLModel, *, origin: str = "") -> Event:
         """Publish ``body``; never waits. Returns the event that was delivered."""
         channel = self._channel
         if self._version != channel._version:
             self._targets = channel._match(self.domain, self.type)
             self._version = channel._version
-        return channel._deliver(self.domain, self.type, body, self._targets)
+        return channel._deliver(self.domain, self.type, body, self._targets, origin)
 
 
 class EventChannel:
@@ -227,7 +252,7 @@ class EventChannel:
         self._version = 0
         self._seq = 0
         self._order = 0
-        self._taps: list[Callable[[Event], Any]] = []
+        self._counts: Counter[str] = Counter()
         self._closed = False
 
     # -- consumers -------------------------------------------------------------------
@@ -242,14 +267,13 @@ class EventChannel:
         self._changed()
         return subscription
 
-    def add_tap(self, tap: Callable[[Event], Any]) -> Callable[[], None]:
-        """Call ``tap(event)`` synchronously for every event (recorders, digests).
-
-        A tap must be fast and must not raise; it sees every event, never drops.
-        Returns a function that removes the tap.
-        """
-        self._taps.append(tap)
-        return lambda: self._taps.remove(tap)
+    def observe(self, *, maxsize: int = 4096,
+                policy: Overflow = Overflow.DROP_OLDEST) -> Subscription:
+        """A subscription to every event of every domain, for observers (digests,
+        recorders, the console, bridges): its own bounded buffer, statistics and
+        isolation. The observer reads it in its own task; a full buffer drops and
+        counts, it never slows the publisher."""
+        return self.subscribe("*", "*", maxsize=maxsize, policy=policy)
 
     # -- suppliers -------------------------------------------------------------------
     def offer(self, domain: str, type: str) -> Publisher:
@@ -262,9 +286,16 @@ class EventChannel:
             publisher = self._publishers[key] = Publisher(self, domain, type)
         return publisher
 
-    def publish(self, domain: str, type: str, body: IDLModel) -> Event:
+    def publish(self, domain: str, type: str, body: IDLModel, *, origin: str = "") -> Event:
         """Publish one event; a plain call that never waits for consumers."""
-        return self.offer(domain, type).publish(body)
+        return self.offer(domain, type).publish(body, origin=origin)
+
+    def inject(self, event: Event) -> Event:
+        """Deliver an event made elsewhere (a bridge, a log player) with its time stamp
+        and origin kept; it gets this channel's next sequence number."""
+        return self._deliver(event.domain, event.type, event.body,
+                             self.offer(event.domain, event.type)._current_targets(),
+                             event.origin, event.time)
 
     def subscribed(self, domain: str, type: str) -> bool:
         """Whether anyone subscribes to ``(domain, type)``."""
@@ -282,6 +313,10 @@ class EventChannel:
         """Events published so far (the last sequence number)."""
         return self._seq
 
+    def counts(self) -> dict[str, int]:
+        """Events published so far per event name (type)."""
+        return dict(self._counts)
+
     def close(self) -> None:
         """Close every subscription; further subscribes fail."""
         self._closed = True
@@ -290,16 +325,16 @@ class EventChannel:
 
     # -- internals -------------------------------------------------------------------
     def _deliver(self, domain: str, type: str, body: IDLModel,
-                 targets: tuple[Subscription, ...]) -> Event:
+                 targets: tuple[Subscription, ...], origin: str,
+                 time: float | None = None) -> Event:
         if not isinstance(body, IDLModel):
             raise TypeError(f"event body must be an IDL model, not {type_name(body)}")
         self._seq += 1
-        event = Event(domain, type, self._now(), self._seq, body)
+        self._counts[type] += 1
+        event = Event(domain, type, self._now() if time is None else time, self._seq, body,
+                      origin)
         for subscription in targets:
             subscription._push(event)
-        if self._taps:
-            for tap in self._taps:
-                tap(event)
         return event
 
     def _match(self, domain: str, type: str) -> tuple[Subscription, ...]:

@@ -21,6 +21,7 @@ from typing import Generic, TypeVar
 from afa.clock import Clock
 from afa.codec import StreamDecoder
 from afa.errors import EDevIO
+from afa.tasks import Scope, first_error, spawn
 from afa.transport import ByteStream, DeviceSpec, MemoryByteStream, memory_pipe
 
 __all__ = ["FakeDevice"]
@@ -57,11 +58,12 @@ class FakeDevice(Generic[C]):
 
     # -- serving -------------------------------------------------------------------------
     async def serve(self, stream: ByteStream) -> None:
-        """Play the device on ``stream`` until it closes."""
+        """Play the device on ``stream`` until it closes. Raises what a hook raised
+        (a bug in the fake), never the end of the connection."""
         decoder = self.command_decoder()
         try:
-            async with asyncio.TaskGroup() as tasks:
-                producer = tasks.create_task(self.produce(stream))
+            async with Scope() as scope:
+                producer = scope.spawn(self.produce(stream), f"{self.name}:produce")
                 if decoder is not None:
                     while True:
                         data = await stream.read()
@@ -70,8 +72,12 @@ class FakeDevice(Generic[C]):
                             await self.on_command(command, stream)
                 else:
                     await producer
-        except* EDevIO:
+        except EDevIO:
             pass  # the host went away: this connection is over
+        except BaseExceptionGroup as group:
+            error = first_error(group)
+            if not isinstance(error, EDevIO):
+                raise error from None
         finally:
             await stream.close()
 
@@ -84,8 +90,7 @@ class FakeDevice(Generic[C]):
             host, device = memory_pipe(self.name)
             self.opens += 1
             self._streams.append(device)
-            task = asyncio.get_running_loop().create_task(self.serve(device),
-                                                          name=f"fake:{self.name}")
+            task = spawn(self.serve(device), owner=f"fake {self.name}")
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
             return host

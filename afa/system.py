@@ -4,99 +4,189 @@
 (a notebook's, a test's, or the CLI's) and stops them all on exit; afa never calls
 ``asyncio.run`` outside the CLI and never takes a ``loop=`` argument.
 
-Supervision: each component runs in its own supervisor task. An exception fails only
-that component: it is logged with its name, marked failed, and restarted with backoff
-per its :class:`~afa.component.RestartPolicy`; the others keep running. Start-up
-starts components in order, waiting each one's start delay (the seed Launcher's dT), and
-raises one :class:`~afa.errors.StartupError` naming every component whose first start
-failed.
+- **Supervision**: each component runs in its own supervisor task. An exception fails
+  only that component: it is logged with its name, marked failed, and restarted with
+  backoff per its :class:`~afa.component.RestartPolicy`; the others keep running.
+  Start-up starts components in order, waiting each one's start delay (the seed
+  Launcher's dT), and raises one :class:`~afa.errors.StartupError` naming every
+  component whose first start failed.
+- **Owned tasks**: the system owns a :class:`~afa.tasks.TaskGroup`; every task of the
+  framework, the fake devices, the simulation and bridges runs in it. A task that
+  fails outside a component (a fake device, the simulation's physics) fails the system:
+  :meth:`run` raises :class:`~afa.errors.TaskFailed`, and so does leaving the
+  ``async with`` block if nobody has seen it yet.
+- **The catalog** (:meth:`catalog`): every port of every component, from construction.
+- **Devices**: ``devices`` maps component names to factories that open a fake device
+  or an emulator in place of the real one (a name that is no component is an error);
+  ``real_devices=False`` (or the environment variable ``AFA_FORBID_REAL_DEVICES=1``,
+  which afa's test suite sets) makes opening a real serial port or socket an error.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from collections import Counter
-from collections.abc import Iterable, Mapping
+import os
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
 from afa.clock import Clock, WallClock
-from afa.component import Component, Context, Health, RestartPolicy, State
-from afa.errors import ComponentError, StartupError
-from afa.events import Event, EventChannel
+from afa.component import Component, Context, Health, PublishServerReactor, RestartPolicy, State
+from afa.errors import ComponentError, StartupError, TaskFailed
+from afa.events import Event, EventChannel, Overflow, Subscription
 from afa.naming import NameRegistry, join_name
-from afa.polling import proxy_for
+from afa.polling import LocalInvoker, PollLayer, proxy_for
+from afa.ports import Catalog
+from afa.tasks import Scope, TaskGroup
 from afa.transport import DeviceFactory, DeviceOpener
 from idl._base import Interface
 
-__all__ = ["System"]
+__all__ = ["System", "Observer", "FORBID_REAL_DEVICES"]
 
 InterfaceT = TypeVar("InterfaceT", bound=Interface)
 log = logging.getLogger("afa.system")
+
+#: Environment variable: when "1", no System opens a real device (tests set it).
+FORBID_REAL_DEVICES = "AFA_FORBID_REAL_DEVICES"
+
+#: ``provider(component)``: a device factory to use in place of ``component``'s real
+#: device, or None (a simulation provides emulators this way).
+DeviceProvider = Callable[[Component[Any]], DeviceFactory | None]
+
+
+class Observer:
+    """A callback that sees every event, in its own task with its own buffer: it never
+    slows or fails a publisher. ``statistics()``: delivered, dropped, errors."""
+
+    def __init__(self, name: str, subscription: Subscription,
+                 callback: Callable[[Event], Any]) -> None:
+        self.name = name
+        self.subscription = subscription
+        self.callback = callback
+        self.errors = 0
+
+    async def run(self) -> None:
+        async for event in self.subscription:
+            try:
+                result = self.callback(event)
+                if result is not None:
+                    await result
+            except Exception:
+                self.errors += 1
+                if self.errors <= 3:
+                    log.exception("observer %s failed on %s (event dropped)", self.name,
+                                  event.type)
+
+    async def drain(self) -> None:
+        """Process everything already queued (before a summary or a digest is read)."""
+        while (event := self.subscription.get_nowait()) is not None:
+            try:
+                result = self.callback(event)
+                if result is not None:
+                    await result
+            except Exception:
+                self.errors += 1
+
+    def statistics(self) -> dict[str, int]:
+        stats = self.subscription.statistics()
+        return {"delivered": stats.delivered, "dropped": stats.dropped, "errors": self.errors}
+
+    def close(self) -> None:
+        self.subscription.close()
 
 
 class System:
     """A set of components sharing one channel, registry and clock.
 
     ``components`` are started in the given order; ``start_delays`` maps a component
-    name to the seconds to wait after starting it (dT). ``devices`` maps a component
-    name to a factory opening a byte stream in place of its real device. ``base_dir``
-    is where components resolve relative file names (the configuration's folder).
+    name to the seconds to wait after starting it (dT). ``devices`` replaces components'
+    real devices: a mapping of component name to device factory, or a provider function
+    asked for each component. ``base_dir`` is where components resolve relative file
+    names (the configuration's folder).
+
+    Raises :class:`~afa.errors.ComponentError` for a device override that names no
+    component, or for two components with one name.
     """
 
     def __init__(
         self,
-        components: Iterable[Component] = (),
+        components: Iterable[Component[Any]] = (),
         *,
         robot: str = "Raptor",
         clock: Clock | None = None,
-        devices: Mapping[str, DeviceFactory] | None = None,
+        devices: Mapping[str, DeviceFactory] | DeviceProvider | None = None,
         restart_policy: RestartPolicy = RestartPolicy(),
         start_delays: Mapping[str, float] | None = None,
         base_dir: str | Path | None = None,
+        real_devices: bool | None = None,
     ) -> None:
         self.robot = robot
         self.clock: Clock = clock or WallClock()
         self.channel = EventChannel(self.clock)
         self.registry = NameRegistry(self.clock)
-        self.devices = DeviceOpener(dict(devices or {}))
+        self.polls = PollLayer(self.clock)
+        if real_devices is None:
+            real_devices = os.environ.get(FORBID_REAL_DEVICES, "") not in ("1", "true", "yes")
+        self.real_devices = real_devices
+        self._provider: DeviceProvider | None = devices if callable(devices) else None
+        overrides = {} if devices is None or callable(devices) else dict(devices)
+        self.devices = DeviceOpener(overrides, allow_real=real_devices, clock=self.clock)
         self.restart_policy = restart_policy
         self.start_delays = dict(start_delays or {})
         self.base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
         self.configuration: Any = None  # the validated Configuration, when built from XML
-        self.components: dict[str, Component] = {}
-        self.notes: list[str] = []  # start-up remarks (e.g. components not implemented yet)
+        self.components: dict[str, Component[Any]] = {}
+        self.notes: list[str] = []  # start-up remarks
+        self.failures: list[tuple[str, BaseException]] = []
+        self._reported = 0
         self._supervisors: dict[str, asyncio.Task[None]] = {}
-        self._event_counts: Counter[str] = Counter()
+        self._tasks: TaskGroup | None = None
+        self._observers: list[Observer] = []
         self._running = False
         self._stopped = asyncio.Event()
+        self._failed = asyncio.Event()
         for component in components:
             self.add(component)
+        unknown = sorted(set(overrides) - set(self.components))
+        if unknown:
+            raise ComponentError(
+                f"devices names {', '.join(map(repr, unknown))}, which "
+                f"{'is' if len(unknown) == 1 else 'are'} not a component here; the components "
+                f"are {', '.join(self.components) or 'none'}")
 
     @classmethod
     def from_xml(cls, path: str | Path, **options: Any) -> System:
         """Build the system a Miro XML configuration file describes.
 
         Options are passed to the constructor (``clock``, ``devices``, ...) except
-        ``strict`` (default False): when True a configured component whose
-        implementation is not written yet is an error instead of a start-up note.
-        Raises :class:`~afa.errors.ConfigError` for an invalid file.
+        ``only`` (component names to keep, e.g. to test one component with its
+        configured parameters). Raises :class:`~afa.errors.ConfigError` for an invalid
+        file (``file:line:`` messages), including a component type that is not installed.
         """
         from afa.assembly import build_system  # config + registry; kept out of import time
 
         return build_system(cls, Path(path), **options)
 
-    def add(self, component: Component) -> Component:
+    def add(self, component: Component[Any]) -> Component[Any]:
         """Add a component (before start, or while running: it starts at once)."""
         if component.name in self.components:
             raise ComponentError(f"two components are named {component.name!r}")
         self.components[component.name] = component
+        if self._provider is not None:
+            factory = self._provider(component)
+            if factory is not None:
+                self.devices.overrides[component.name] = factory
         component._attach(Context(self.robot, self.channel, self.registry, self.clock,
-                                  self.devices, self.base_dir))
+                                  self.devices, self.base_dir, self.polls))
         if self._running:
             self._launch(component)
         return component
+
+    def catalog(self) -> Catalog:
+        """Every declared port of every component (available before start)."""
+        return Catalog([port for c in self.components.values() for port in c.ports()],
+                       self.robot)
 
     # -- running -------------------------------------------------------------------------
     async def __aenter__(self) -> System:
@@ -104,17 +194,28 @@ class System:
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:
-        await self.stop()
+        await self.stop(raise_failures=exc_info[0] is None)
+
+    @property
+    def tasks(self) -> TaskGroup:
+        """The system's task group (while running)."""
+        if self._tasks is None:
+            raise ComponentError("the system is not running")
+        return self._tasks
 
     async def start(self) -> None:
         """Start every component in order; raises StartupError if any first start fails
         (after stopping the ones that started)."""
         if self._running:
             return
+        self._check_devices()
         self._running = True
         self._stopped = asyncio.Event()
+        self._failed = asyncio.Event()
+        self._tasks = TaskGroup(f"system {self.robot}", on_failure=self._task_failed)
+        for observer in self._observers:
+            self._tasks.spawn(observer.run(), owner=f"observer {observer.name}")
         self.registry.rebind(join_name(self.robot, "EventChannel"), self.channel, owner=self)
-        self._remove_tap = self.channel.add_tap(self._count)
         failures: dict[str, BaseException] = {}
         for component in list(self.components.values()):
             self._launch(component)
@@ -128,26 +229,57 @@ class System:
         for note in self.notes:
             log.warning("%s", note)
         if failures:
-            await self.stop()
+            await self.stop(raise_failures=False)
             raise StartupError(failures)
 
-    async def stop(self) -> None:
-        """Stop every component (reverse start order) and unbind the channel."""
+    async def stop(self, *, raise_failures: bool = True) -> None:
+        """Stop every component (reverse start order), the observers and every owned
+        task. Raises TaskFailed if an owned task failed and nobody has been told."""
         if not self._running:
             return
         for name in reversed(list(self._supervisors)):
             await self.stop_component(name)
-        self._remove_tap()
+        for observer in self._observers:
+            observer.close()
+        self._observers.clear()
+        if self._tasks is not None:
+            await self._tasks.aclose()
+            self._tasks = None
         self.registry.unbind_owner(self)
         self._running = False
         self._stopped.set()
+        if raise_failures:
+            self._raise_failures()
 
     async def run(self, duration: float | None = None) -> None:
-        """Run until ``duration`` clock seconds have passed (None: until stopped)."""
-        if duration is None:
-            await self._stopped.wait()
-        else:
-            await self.clock.sleep(duration)
+        """Run until ``duration`` clock seconds have passed (None: until stopped).
+        Raises TaskFailed as soon as a task of the system (not of a component) fails."""
+        self._raise_failures()
+        waiter = self._stopped.wait() if duration is None else self.clock.sleep(duration)
+        await _first_of(waiter, self._failed.wait())
+        self._raise_failures()
+
+    def _raise_failures(self) -> None:
+        if len(self.failures) > self._reported:
+            owner, error = self.failures[self._reported]
+            self._reported = len(self.failures)
+            raise TaskFailed(owner, error) from error
+
+    def _task_failed(self, owner: str, error: BaseException) -> None:
+        self.failures.append((owner, error))
+        self._failed.set()
+
+    def observe(self, callback: Callable[[Event], Any], *, name: str, maxsize: int = 4096,
+                policy: Overflow = Overflow.DROP_OLDEST) -> Observer:
+        """Run ``callback(event)`` (sync or async) for every event, in a task of its own
+        with a bounded buffer (see :class:`Observer`). Made before start, it sees every
+        event from the first; it ends when the system stops."""
+        observer = Observer(name, self.channel.observe(maxsize=maxsize, policy=policy),
+                            callback)
+        self._observers.append(observer)
+        if self._tasks is not None:
+            self._tasks.spawn(observer.run(), owner=f"observer {name}")
+        return observer
 
     # -- operator actions (the Launcher's start/stop/restart) -------------------------
     async def stop_component(self, name: str) -> None:
@@ -176,13 +308,20 @@ class System:
         await self.start_component(name)
 
     # -- polling from outside (notebooks, tools, tests) --------------------------------
+    def proxy(self, interface: type[InterfaceT], name: str, *,
+              call_timeout: float | None = None) -> InterfaceT:
+        """A client proxy for ``<Robot>/<name>``: it reaches whatever serves the name at
+        each call (NameNotFound while nothing does)."""
+        full = join_name(self.robot, name)
+        return proxy_for(interface, LocalInvoker(self.registry, full, interface),
+                         middleware=self.polls.middleware, timeout=call_timeout)
+
     async def resolve(self, interface: type[InterfaceT], name: str, *,
                       timeout: float | None = None,
                       call_timeout: float | None = None) -> InterfaceT:
-        """A client proxy for ``<Robot>/<name>`` (waits up to ``timeout`` for the bind)."""
-        full = join_name(self.robot, name)
-        servant = await self.registry.wait_resolve(full, timeout)
-        return proxy_for(interface, servant, self.clock, timeout=call_timeout, name=full)
+        """:meth:`proxy`, once the name is bound (waits up to ``timeout``; ETimeOut)."""
+        await self.registry.wait_resolve(join_name(self.robot, name), timeout)
+        return self.proxy(interface, name, call_timeout=call_timeout)
 
     # -- observation -------------------------------------------------------------------
     def health(self) -> dict[str, Health]:
@@ -191,25 +330,38 @@ class System:
     def statistics(self) -> dict[str, Any]:
         dropped = sum(s.statistics().dropped for s in self.channel.subscriptions())
         return {
-            "events": dict(sorted(self._event_counts.items())),
+            "events": dict(sorted(self.channel.counts().items())),
             "events_published": self.channel.published,
             "events_dropped": dropped,
             "components": {name: c.statistics() for name, c in self.components.items()},
+            "polls": {f"{name}.{method}": stats.as_dict()
+                      for (name, method), stats in sorted(self.polls.statistics.items())},
+            "observers": {o.name: o.statistics() for o in self._observers},
         }
 
-    def _count(self, event: Event) -> None:
-        self._event_counts[event.type] += 1
+    # -- internals -----------------------------------------------------------------------
+    def _check_devices(self) -> None:
+        if self.real_devices:
+            return
+        missing = [c.name for c in self.components.values()
+                   if isinstance(c, PublishServerReactor) and c.name not in self.devices.overrides]
+        if missing:
+            raise StartupError({name: ComponentError(
+                f"{name} would open its real device, and real devices are forbidden here "
+                f"(real_devices=False or {FORBID_REAL_DEVICES}=1): give it a fake in "
+                "devices={...}") for name in missing})
 
-    def _launch(self, component: Component) -> None:
+    def _launch(self, component: Component[Any]) -> None:
         component._set_state(State.CREATED)
-        self._supervisors[component.name] = asyncio.get_running_loop().create_task(
-            self._supervise(component), name=f"afa-supervisor:{component.name}")
+        self._supervisors[component.name] = self.tasks.spawn(
+            self._supervise(component), owner=component.name,
+            name=f"afa-supervisor:{component.name}")
 
-    async def _supervise(self, component: Component) -> None:
+    async def _supervise(self, component: Component[Any]) -> None:
         policy = component.restart_policy or self.restart_policy
         attempt = 0
         while True:
-            started = self.clock.now()
+            started = self.clock.monotonic()
             try:
                 await component._run_once()
                 component._set_state(State.STOPPED)
@@ -220,7 +372,7 @@ class System:
                 component._record_failure(exc)
             if not policy.restart:
                 return
-            if self.clock.now() - started >= policy.reset_after:
+            if self.clock.monotonic() - started >= policy.reset_after:
                 attempt = 0
             if policy.max_restarts is not None and attempt >= policy.max_restarts:
                 log.error("%s failed %d times in a row; giving up", component.name, attempt + 1)
@@ -230,3 +382,19 @@ class System:
             log.warning("restarting %s in %.2f s", component.name, delay)
             await self.clock.sleep(delay)
             component.restarts += 1
+
+
+async def _first_of(*awaitables: Any) -> None:
+    """Wait until the first of ``awaitables`` finishes; cancel the rest."""
+    done = asyncio.Event()
+
+    async def watch(awaitable: Any) -> None:
+        await awaitable
+        done.set()
+
+    async with Scope() as scope:
+        tasks = [scope.spawn(watch(a), "afa-wait") for a in awaitables]
+        await done.wait()
+        for task in tasks:
+            task.cancel()
+

@@ -17,10 +17,11 @@ from collections.abc import Awaitable, Callable
 from afa.clock import Clock, VirtualClock
 from afa.errors import ETimeOut
 from afa.fake import FakeDevice
+from afa.tasks import TaskGroup
 from afa.transport import ByteStream, DeviceSpec, MemoryByteStream, memory_pipe
 
-__all__ = ["VirtualClock", "memory_pipe", "MemoryByteStream", "FakeDevice", "settle", "until",
-           "serve"]
+__all__ = ["VirtualClock", "memory_pipe", "MemoryByteStream", "FakeDevice", "TaskGroup", "settle",
+           "until", "serve"]
 
 
 async def settle(clock: Clock | None = None) -> None:
@@ -37,9 +38,9 @@ async def until(predicate: Callable[[], bool], clock: Clock, *, timeout: float =
 
     Raises :class:`~afa.errors.ETimeOut` after ``timeout`` clock seconds.
     """
-    deadline = clock.now() + timeout
+    deadline = clock.monotonic() + timeout
     while not predicate():
-        if clock.now() >= deadline:
+        if clock.monotonic() >= deadline:
             raise ETimeOut(f"{what} not reached within {timeout:g} s")
         await clock.sleep(step)
 

@@ -11,7 +11,9 @@ the same way). Three implementations:
 
 A device is named by a :class:`DeviceSpec` (a serial port or a TCP endpoint);
 :class:`DeviceOpener` opens specs, and lets the simulator or a test install a factory
-per component name instead of the real device.
+per component name instead of the real device (and refuses real devices where they are
+forbidden). Reads from real transports are marked as real I/O on the clock, so a
+virtual clock does not mistake waiting on a device for idleness.
 """
 
 from __future__ import annotations
@@ -24,7 +26,9 @@ from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass
 from typing import Any
 
-from afa.errors import EDevIO, TransportClosed
+from afa.clock import Clock, WallClock
+from afa.errors import EDevIO, RealDeviceForbidden, TransportClosed
+from afa.tasks import spawn
 
 __all__ = [
     "ByteStream", "MemoryByteStream", "memory_pipe", "AsyncioByteStream", "PtyDeviceStream",
@@ -139,15 +143,17 @@ class AsyncioByteStream(ByteStream):
     """A :class:`ByteStream` over an asyncio ``StreamReader``/``StreamWriter`` pair."""
 
     def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
-                 name: str) -> None:
+                 name: str, clock: Clock | None = None) -> None:
         self._reader = reader
         self._writer = writer
         self._closed = False
+        self._clock = clock or _REAL_TIME
         self.name = name
 
     async def read(self, max_bytes: int = 4096) -> bytes:
         try:
-            data = await self._reader.read(max_bytes)
+            with self._clock.real_io():
+                data = await self._reader.read(max_bytes)
         except (OSError, asyncio.IncompleteReadError) as exc:
             raise EDevIO(f"{self.name}: read failed: {exc}") from exc
         if not data:
@@ -176,7 +182,11 @@ class AsyncioByteStream(ByteStream):
         return self._closed
 
 
-async def open_serial(device: str, baudrate: int, **serial_options: object) -> ByteStream:
+_REAL_TIME = WallClock()
+
+
+async def open_serial(device: str, baudrate: int, *, clock: Clock | None = None,
+                      **serial_options: object) -> ByteStream:
     """Open a serial port through pyserial-asyncio; raises EDevIO if it cannot."""
     try:
         import serial  # noqa: F401  (pyserial's exceptions)
@@ -188,16 +198,17 @@ async def open_serial(device: str, baudrate: int, **serial_options: object) -> B
             url=device, baudrate=baudrate, **serial_options)
     except (OSError, ValueError, serial.SerialException) as exc:
         raise EDevIO(f"cannot open serial port {device} at {baudrate} baud: {exc}") from exc
-    return AsyncioByteStream(reader, writer, device)
+    return AsyncioByteStream(reader, writer, device, clock)
 
 
-async def open_tcp(host: str, port: int) -> ByteStream:
+async def open_tcp(host: str, port: int, *, clock: Clock | None = None) -> ByteStream:
     """Connect to ``host:port``; raises EDevIO if it cannot."""
     try:
-        reader, writer = await asyncio.open_connection(host, port)
+        with (clock or _REAL_TIME).real_io():
+            reader, writer = await asyncio.open_connection(host, port)
     except OSError as exc:
         raise EDevIO(f"cannot connect to {host}:{port}: {exc}") from exc
-    return AsyncioByteStream(reader, writer, f"{host}:{port}")
+    return AsyncioByteStream(reader, writer, f"{host}:{port}", clock)
 
 
 @dataclass(frozen=True, slots=True)
@@ -223,9 +234,10 @@ class PtyDeviceStream(ByteStream):
     path (:attr:`path`) as a real serial port through pyserial-asyncio.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Clock | None = None) -> None:
         import tty
 
+        self._clock = clock or _REAL_TIME
         self._fd, self._worker = os.openpty()
         tty.setraw(self._fd)
         os.set_blocking(self._fd, False)
@@ -239,7 +251,8 @@ class PtyDeviceStream(ByteStream):
             try:
                 data = os.read(self._fd, max_bytes)
             except BlockingIOError:
-                await self._ready(reading=True)
+                with self._clock.real_io():
+                    await self._ready(reading=True)
                 continue
             except OSError as exc:
                 raise TransportClosed(f"{self.path}: {exc}") from exc
@@ -312,7 +325,7 @@ class _SharedPort:
             return host
 
     def _own(self, coroutine: Coroutine[Any, Any, None]) -> None:
-        task = asyncio.get_running_loop().create_task(coroutine, name=f"afa-shared:{self._name}")
+        task = spawn(coroutine, owner=f"shared port {self._name}")
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
@@ -354,11 +367,16 @@ class DeviceOpener:
     ``overrides`` maps a component name to an async factory receiving the spec and
     returning the device (a :class:`ByteStream`, or for devices that are not byte
     streams, such as a camera, whatever the driver expects). Two components naming the
-    same serial device share one connection.
+    same serial device share one connection. With ``allow_real=False`` a component
+    without an override gets :class:`~afa.errors.RealDeviceForbidden` instead of its
+    real port (tests must never drive a vehicle's serial line).
     """
 
-    def __init__(self, overrides: dict[str, DeviceFactory] | None = None) -> None:
+    def __init__(self, overrides: dict[str, DeviceFactory] | None = None, *,
+                 allow_real: bool = True, clock: Clock | None = None) -> None:
         self.overrides: dict[str, DeviceFactory] = dict(overrides or {})
+        self.allow_real = allow_real
+        self.clock = clock
         self._shared: dict[str, _SharedPort] = {}
 
     async def open(self, component: str, spec: Any) -> Any:
@@ -371,14 +389,19 @@ class DeviceOpener:
             return await factory(spec)
         if not isinstance(spec, (SerialSpec, TcpSpec)):
             raise EDevIO(f"{component}: no device available for {spec!r}")
+        if not self.allow_real:
+            raise RealDeviceForbidden(
+                f"{component} would open its real device {spec}, and real devices are "
+                "forbidden here; give it a fake device")
         if isinstance(spec, SerialSpec):
             return await self.open_serial(spec)
-        return await open_tcp(spec.host, spec.port)
+        return await open_tcp(spec.host, spec.port, clock=self.clock)
 
     async def open_serial(self, spec: SerialSpec) -> ByteStream:
-        """Open a real serial port, shared with any other component naming it."""
+        """Open a serial port (real, or a pseudo-terminal an emulator serves), shared
+        with any other component naming it."""
         port = self._shared.get(spec.device)
         if port is None:
             port = self._shared[spec.device] = _SharedPort(
-                lambda: open_serial(spec.device, spec.baudrate), spec.device)
+                lambda: open_serial(spec.device, spec.baudrate, clock=self.clock), spec.device)
         return await port.open()

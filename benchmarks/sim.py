@@ -25,24 +25,22 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from afa import System, VirtualClock  # noqa: E402
+from afa import VirtualClock  # noqa: E402
 from afa.sim.raycast import cast_rays, depth_image  # noqa: E402
-from components.simulation import STEREO_SUBSAMPLE, RaptorSimulation  # noqa: E402
+from components.simulation import RaptorSimulation  # noqa: E402
+from components.stereo.emulator import STEREO_SUBSAMPLE  # noqa: E402
 
 #: Issue 5's target for the whole sensing stack under --fast.
 TARGET = 20.0
 
 
 async def whole_stack(world: Path, duration: float) -> dict[str, float]:
-    clock = VirtualClock()
-    system = System.from_xml(ROOT / "configs" / "raptor.xml", clock=clock)
-    simulation = RaptorSimulation(world, clock, seed=0)
-    simulation.attach(system)
+    simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml", world,
+                                           clock=VirtualClock(), seed=0)
     start = time.perf_counter()
     async with simulation:
-        async with system:
-            await system.run(duration)
-            events = sum(system.statistics()["events"].values())
+        await simulation.system.run(duration)
+        events = sum(simulation.system.statistics()["events"].values())
     wall = time.perf_counter() - start
     return {"sim_time_s": round(simulation.sim_time, 2), "wall_time_s": round(wall, 3),
             "realtime_factor": round(simulation.sim_time / wall, 2), "events": events,
@@ -52,7 +50,7 @@ async def whole_stack(world: Path, duration: float) -> dict[str, float]:
 def ray_casting(world: Path, repeat: int = 50) -> dict[str, float]:
     clock = VirtualClock()
     simulation = RaptorSimulation(world, clock, seed=0)
-    pose = simulation._frame("FrontNoddingSICKLeft:AxleCenterFreeEnd")
+    pose = simulation.frame_pose("FrontNoddingSICKLeft:AxleCenterFreeEnd")
     bearings = np.deg2rad(np.arange(361) * 0.5)
     nod = math.radians(-25.0)
     local = np.stack([np.sin(bearings) * math.cos(nod), -np.cos(bearings),

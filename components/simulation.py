@@ -1,21 +1,15 @@
 """The simulated Raptor: the world, the vehicle, and every device emulator (SPEC §2).
 
-:class:`RaptorSimulation` owns the terrain and the vehicle model (``afa.sim``) and puts a
-fake device in place of each configured device component, fed with ground truth: the
-emulators speak the real wire protocols, so the real drivers run unchanged.
+:class:`RaptorSimulation` owns the terrain and the vehicle model (``afa.sim``) and gives
+each configured device component an emulator in place of its real device, fed with
+ground truth: the emulators speak the real wire protocols, so the real drivers run.
+Each device package registers its emulator beside its codec and fake (entry point group
+``afa.emulators``: ``components/<device>/emulator.py``); the simulation looks them up by
+component type and offers them to the System at construction
+(``System(devices=sim.device_for)``), through the :class:`SimulatedWorld` API.
 
-- GPS Sokkia: NovAtel logs of the antenna's position and velocity (with the receiver's
-  noise model);
-- IMU: 3DM-GX1 packets of the sensor's attitude, rates and specific force;
-- MPC555: the controller's commands drive the vehicle model (its ``plant``), its reports
-  carry the front wheels' distances;
-- Nodding lasers: each scan line ray-cast against the heightfield at the beam angles
-  and the nod angle the controller reports;
-- Stereo: depth images ray-cast from the camera and turned into disparity.
-
-Sensor poses come from the geometry model (``ModelFileName``), the vehicle pose from the
-motion model. The simulation also runs the world's ``drive`` script through the Vehicle
-Control interface and keeps the run summary (distance, collisions, waypoints, pose error
+The simulation also runs the world's ``drive`` script through the Vehicle Control
+interface and keeps the run summary (distance, collisions, waypoints, pose error
 against ground truth, a digest of every event).
 """
 
@@ -25,35 +19,27 @@ import asyncio
 import hashlib
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, Protocol, TypeVar
 
 import numpy as np
 
-from afa import ByteStream, Clock, EDevIO, Event, SerialSpec, System, TcpSpec
+from afa import ByteStream, Clock, EDevIO, Event, SerialSpec, System, TcpSpec, registry
 from afa.component import Component
-from afa.sim.raycast import cast_rays, depth_image
+from afa.ports import Direction, interface_name
 from afa.sim.terrain import Terrain
 from afa.sim.vehicle import Vehicle, VehicleState
 from afa.sim.world import World, load_world
-from afa.transport import AsyncioByteStream, PtyDeviceStream, open_tcp
-from components.gps_sokkia import GpsSokkia
-from components.gps_sokkia.codec import PositionType, latlon_to_utm
-from components.gps_sokkia.fake import FakeGps, GpsNoise, GpsTruth
-from components.imu import Imu
-from components.imu.fake import FakeImu, ImuTruth
+from afa.tasks import spawn
+from afa.transport import AsyncioByteStream, DeviceFactory, PtyDeviceStream, open_tcp
+from components.gps_sokkia.codec import latlon_to_utm
 from components.model_server.geometry import GeometryModel
-from components.mpc555 import VehicleControl, WheelOdometry
-from components.mpc555.fake import DriveCommand, FakeMpc555, WheelTruth, front_wheel_speeds
-from components.nodding_laser import NodLaser
-from components.nodding_laser.fake import FakeNodLaser
-from components.stereo import Stereo
-from components.stereo.backends import DIGICLOPS_MODEL, SyntheticBackend, serve_camera
 from idl import PoseTransformIDL, VelocityIDL
 from idl import VehicleControl as VehicleControlInterface
 
-__all__ = ["RaptorSimulation", "DEFAULT_WORLD", "WAYPOINT_TOLERANCE"]
+__all__ = ["RaptorSimulation", "SimulatedWorld", "DEFAULT_WORLD", "WAYPOINT_TOLERANCE"]
 
 log = logging.getLogger("afa.sim")
 
@@ -68,24 +54,121 @@ PHYSICS_STEP = 0.02
 #: How often the drive script repeats its joystick command (s): Vehicle Control's
 #: watchdog stops the vehicle when commands stop arriving, as a real joystick link would.
 JOYSTICK_PERIOD = 0.1
-#: The Raptor's GSR2600 took RTCA corrections from a Pacific Crest radio: NovAtel's RT-20
-#: carrier-phase differential mode, 0.20 m CEP (OEM4 specification), i.e. about 0.17 m
-#: per axis; errors correlated over ~10 s as the receiver's noise model says.
-GPS_NOISE = GpsNoise(horizontal=0.17, vertical=0.34)
-#: The stereo emulator ray-casts one depth sample per STEREO_SUBSAMPLE^2 pixels.
-STEREO_SUBSAMPLE = 4
+
+F = TypeVar("F")
+
+
+def served_name(system: System, interface: type[Any]) -> str | None:
+    """The name the first component serving ``interface`` binds (from the catalog)."""
+    wanted = interface_name(interface)
+    for port in system.catalog().by(Direction.SERVES):
+        if port.types == (wanted,):
+            return port.name
+    return None
+
+
+class SimulatedWorld(Protocol):
+    """What a device emulator (``components/<device>/emulator.py``) may use."""
+
+    clock: Clock
+    world: World
+    terrain: Terrain
+    vehicle: Vehicle
+
+    @property
+    def state(self) -> VehicleState: ...
+
+    def mount(self, frame: str) -> np.ndarray:
+        """^V T_frame from the geometry model (constant)."""
+        ...
+
+    def frame_pose(self, frame: str) -> np.ndarray:
+        """^W T_frame now: the vehicle's pose times the frame's mounting."""
+        ...
+
+    def rng(self) -> np.random.Generator:
+        """A generator of its own, seeded from the simulation's seed."""
+        ...
+
+    def command(self, translation: float, steering: float, brake: bool) -> None:
+        """What the vehicle controller commands the physics to do."""
+        ...
+
+    def shared(self, key: str, make: Callable[[], F]) -> F:
+        """One object per simulation under ``key`` (a controller serving two
+        components)."""
+        ...
+
+    def adopt(self, component: Component[Any], fake: Any,
+              kind: Literal["serial", "tcp"] = "serial") -> DeviceFactory:
+        """The device factory serving ``fake`` to ``component`` (an in-memory pipe, or
+        with ``expose`` a pseudo-terminal or loopback port); the simulation closes the
+        fake at the end."""
+        ...
 
 
 class RaptorSimulation:
     """A world, a vehicle, and the emulators for a System's device components.
 
-    Use: ``sim = RaptorSimulation(world, clock, seed=...)``; ``sim.attach(system)``
-    before the system starts; then ``async with sim: async with system: ...``.
+    The short way (tests, notebooks, the CLI)::
+
+        sim = RaptorSimulation.from_xml("configs/raptor.xml", "rock-field.xml",
+                                        clock=VirtualClock(), seed=1)
+        async with sim:                      # the system started, the physics running
+            await sim.system.run(60.0)
+        sim.summary()
+
+    and the parts it is made of::
+
+        sim = RaptorSimulation(world, clock, seed=...)
+        system = System.from_xml(config, clock=clock, devices=sim.device_for)
+        sim.attach(system)                   # observes every event from the start
+        async with system, sim.running():    # physics, drive script
+            await system.run(duration)
     """
 
     @staticmethod
     def default_world() -> Path:
         return DEFAULT_WORLD
+
+    @classmethod
+    def from_xml(cls, config: str | Path, world: World | str | Path | None = None, *,
+                 clock: Clock, seed: int = 0, expose: bool = False,
+                 **system_options: Any) -> RaptorSimulation:
+        """A simulation of ``world`` (default: the open field) with the System that
+        ``config`` describes attached (``sim.system``); ``system_options`` go to
+        :meth:`System.from_xml`. Raises ConfigError for a bad file."""
+        simulation = cls(DEFAULT_WORLD if world is None else world, clock, seed=seed,
+                         expose=expose)
+        system = System.from_xml(config, clock=clock, devices=simulation.device_for,
+                                 **system_options)
+        simulation.attach(system)
+        return simulation
+
+    @property
+    def system(self) -> System:
+        if self._system is None:
+            raise RuntimeError("the simulation is not attached to a System")
+        return self._system
+
+    async def __aenter__(self) -> RaptorSimulation:
+        await self.system.start()
+        try:
+            self._running = self.running()
+            await self._running.__aenter__()
+        except BaseException:
+            await self.system.stop(raise_failures=False)
+            raise
+        return self
+
+    async def __aexit__(self, *exc_info: Any) -> None:
+        try:
+            await self._running.__aexit__(*exc_info)
+        finally:
+            try:
+                await self.system.stop(raise_failures=exc_info[0] is None)
+            finally:
+                await self.aclose()
 
     def __init__(self, world: World | str | Path, clock: Clock, *, seed: int = 0,
                  geometry: GeometryModel | None = None, expose: bool = False) -> None:
@@ -98,240 +181,149 @@ class RaptorSimulation:
         self.terrain = Terrain.from_spec(self.world.terrain, self.world.obstacles)
         self.vehicle = Vehicle.from_world(self.world, self.terrain)
         self.geometry = geometry or GeometryModel.load(CONFIGS / "050917raptor01.XML")
+        self.expose = expose
         self._seeds = np.random.SeedSequence(seed)
         self._start = 0.0
-        self._command = DriveCommand()
+        self._command = (0.0, 0.0, True)  # translation m/s, steering rad, brake
         self.collisions: list[dict[str, Any]] = []
         self.waypoints_reached = 0
         self._next_waypoint = 0
         self._digest = hashlib.sha256()
         self._pose_errors: list[tuple[float, float]] = []
         self.fakes: list[Any] = []
+        self.endpoints: dict[str, str] = {}  # component -> pty path or host:port
+        self._shared: dict[str, Any] = {}
         self._mounts: dict[str, np.ndarray] = {}
-        self._imu_cache: tuple[VehicleState, ImuTruth] | None = None
-        self._tasks: list[asyncio.Task[None]] = []
         self._system: System | None = None
-        self._mpc555: FakeMpc555 | None = None
-        self.expose = expose
-        self._exposed: dict[str, tuple[Any, str]] = {}  # component -> (fake, "serial"|"tcp")
-        self._endpoints: list[Any] = []
+        self._observer: Any = None
 
-    # -- wiring --------------------------------------------------------------------------
-    def attach(self, system: System) -> None:
-        """Install an emulator in place of each device component's real device."""
-        self._system = system
-        overrides = system.devices.overrides
-        for component in system.components.values():
-            if isinstance(component, Stereo):
-                backend = SyntheticBackend(self.clock, render=self._stereo_renderer(component),
-                                           rng=self._rng())
-                overrides[component.name] = serve_camera(backend)
-                continue
-            fake = self._fake_for(component)
-            if fake is None:
-                continue
-            overrides[component.name] = fake.factory()
-            if self.expose:
-                kind = "tcp" if isinstance(component, NodLaser) else "serial"
-                self._exposed[component.name] = (fake, kind)
-        system.channel.add_tap(self._observe)
-
-    def _rng(self) -> np.random.Generator:
-        return np.random.default_rng(self._seeds.spawn(1)[0])
-
-    def _fake_for(self, component: Component) -> Any:
-        """The emulator playing ``component``'s device, or None for a non-device."""
-        if isinstance(component, GpsSokkia):
-            fake: Any = FakeGps(self.clock, self._gps_truth, self._rng(), noise=GPS_NOISE)
-        elif isinstance(component, Imu):
-            fake = FakeImu(self.clock, self._imu_truth, rng=self._rng())
-        elif isinstance(component, (WheelOdometry, VehicleControl)):
-            if self._mpc555 is not None:  # one controller serves both components
-                return self._mpc555
-            fake = self._mpc555 = FakeMpc555(self.clock, plant=self._plant)
-        elif isinstance(component, NodLaser):
-            fake = FakeNodLaser(self.clock, source=self._laser_source(component),
-                                offset_deg=component.parameters.LaserOffsetAngle,
-                                rng=self._rng())
-        else:
-            return None
-        self.fakes.append(fake)
-        return fake
-
-    # -- ground truth for the emulators ----------------------------------------------------
+    # -- SimulatedWorld ------------------------------------------------------------------
     @property
     def state(self) -> VehicleState:
         return self.vehicle.state
 
-    def _mount(self, frame: str) -> np.ndarray:
-        """^V T_frame from the geometry model (constant: looked up once per frame)."""
+    def mount(self, frame: str) -> np.ndarray:
         mount = self._mounts.get(frame)
         if mount is None:
             mount = self._mounts[frame] = self.geometry.transformation(VEHICLE_FRAME, frame)
         return mount
 
-    def _frame(self, frame: str) -> np.ndarray:
-        """^W T_frame now: vehicle pose times the geometry model's ^V T_frame."""
-        return self.state.transform() @ self._mount(frame)
+    def frame_pose(self, frame: str) -> np.ndarray:
+        return self.state.transform() @ self.mount(frame)
 
-    def _gps_truth(self, t: float) -> GpsTruth:
-        state = self.state
-        antenna = self._mount("GpsAntenna:PhaseCenter")[:3, 3]
-        rotation = state.rotation()
-        position = state.position + rotation @ antenna
-        omega = rotation @ state.angular_velocity_body()
-        velocity = state.velocity() + np.cross(omega, rotation @ antenna)
-        lat, lon, height = self.world.origin.enu_to_geodetic(*position)
-        speed = float(math.hypot(velocity[0], velocity[1]))
-        track = math.degrees(math.atan2(velocity[0], velocity[1])) % 360.0 if speed > 1e-6 \
-            else state.heading_deg
-        return GpsTruth(lat=lat, lon=lon, height=self.world.origin.elevation + position[2],
-                        speed=speed, track=track, vertical_speed=float(velocity[2]),
-                        position_type=PositionType.L1_FLOAT)
+    def rng(self) -> np.random.Generator:
+        return np.random.default_rng(self._seeds.spawn(1)[0])
 
-    def _imu_truth(self, t: float) -> ImuTruth:
-        state = self.state
-        cached = self._imu_cache
-        if cached is not None and cached[0] is state:  # the IMU samples 2x per physics step
-            return cached[1]
-        mount = self._mount("Imu:SensorCenter")[:3, :3]
-        to_sensor = mount.T  # sensor-from-vehicle
-        # The 3DM-GX1's angles are NED-style (x forward, y right, z down).
-        yaw = math.remainder(math.pi / 2 - state.yaw, 2 * math.pi)
-        truth = ImuTruth(roll=state.roll, pitch=-state.pitch, yaw=yaw,
-                         accel=tuple((to_sensor @ state.specific_force_body()).tolist()),
-                         rates=tuple((to_sensor @ state.angular_velocity_body()).tolist()))
-        self._imu_cache = (state, truth)
-        return truth
+    def command(self, translation: float, steering: float, brake: bool) -> None:
+        self._command = (translation, steering, brake)
 
-    def _plant(self, t: float, command: DriveCommand) -> WheelTruth:
-        """The MPC555's view of the vehicle: its commands become the physics loop's
-        targets; it reads back the front wheels' distances and speeds."""
-        self._command = command
-        state = self.state
-        parameters = self.vehicle.parameters
-        left, right = front_wheel_speeds(state.speed, state.yaw_rate, parameters.wheelbase,
-                                         parameters.track)
-        return WheelTruth(time=t, left_distance=state.front_left_distance,
-                          right_distance=state.front_right_distance, left_speed=left,
-                          right_speed=right, speed=state.speed, steering=state.steering,
-                          yaw_rate=state.yaw_rate)
+    def shared(self, key: str, make: Callable[[], F]) -> F:
+        if key not in self._shared:
+            self._shared[key] = make()
+        return self._shared[key]  # type: ignore[no-any-return]
 
-    def _laser_source(self, component: NodLaser) -> Callable[..., np.ndarray]:
-        frame = ("FrontNoddingSICKLeft:AxleCenterFreeEnd"
-                 if component.parameters.LaserID == 11 else
-                 "FrontNoddingSICKRight:AxleCenterFreeEnd")
-        max_range = 8.183
+    def adopt(self, component: Component[Any], fake: Any,
+              kind: Literal["serial", "tcp"] = "serial") -> DeviceFactory:
+        if fake not in self.fakes:
+            self.fakes.append(fake)
+        if not self.expose:
+            return fake.factory()  # type: ignore[no-any-return]
+        return self._exposed(component.name, fake, kind)
 
-        beams: list[np.ndarray] = []  # the last bearings seen, their sines and -cosines
+    # -- wiring --------------------------------------------------------------------------
+    def device_for(self, component: Component[Any]) -> DeviceFactory | None:
+        """The emulator factory for ``component`` (None for a component with no device);
+        pass as ``System(devices=sim.device_for)``."""
+        emulate = registry.emulator_for(component.type_name)
+        if emulate is None:
+            return None
+        return emulate(component, self)  # type: ignore[no-any-return]
 
-        def source(t: float, nod_deg: np.ndarray, bearings_deg: np.ndarray) -> np.ndarray:
-            pose = self._frame(frame)
-            if not beams or beams[0] is not bearings_deg:  # the fake reuses one array
-                b = np.deg2rad(bearings_deg)
-                beams[:] = [bearings_deg, np.sin(b), -np.cos(b)]
-            _, sin_b, minus_cos_b = beams
-            n = np.deg2rad(nod_deg)
-            local = np.empty((sin_b.size, 3))
-            np.multiply(sin_b, np.cos(n), out=local[:, 0])
-            local[:, 1] = minus_cos_b
-            np.multiply(sin_b, np.sin(n), out=local[:, 2])
-            # NaN (nothing within range) is a no-return for the fake, as inf would be
-            return cast_rays(self.terrain, pose[:3, 3], local @ pose[:3, :3].T, max_range)
+    def attach(self, system: System) -> None:
+        """Observe ``system``'s events (digest, pose error) from its start."""
+        self._system = system
+        self._observer = system.observe(self._observe, name="simulation", maxsize=1 << 16)
 
-        return source
+    def _exposed(self, name: str, fake: Any, kind: str) -> DeviceFactory:
+        """A factory serving ``fake`` on a pseudo-terminal (one per emulated device, so
+        the MPC555's two components share it) or a loopback TCP port, opened through
+        the real transports."""
+        if kind == "serial":
+            async def open_pty(spec: SerialSpec) -> ByteStream:
+                pty = self._shared.get(f"pty:{id(fake)}")
+                if pty is None:
+                    pty = self._shared[f"pty:{id(fake)}"] = PtyDeviceStream(self.clock)
+                    spawn(fake.serve(pty), owner=f"emulator {name}")
+                if name not in self.endpoints:
+                    self.endpoints[name] = pty.path
+                    log.warning("%s: emulated on %s", name, pty.path)
+                assert self._system is not None
+                return await self._system.devices.open_serial(SerialSpec(pty.path,
+                                                                         spec.baudrate))
+            return open_pty  # type: ignore[return-value]
 
-    def _stereo_renderer(self, component: Stereo) -> Callable[[float], np.ndarray]:
-        """Depth images ray-cast from the camera, ``STEREO_SUBSAMPLE`` times coarser than
-        the 320x240 disparity image and repeated to full size (a 76,800-ray image costs
-        ~0.1 s; the coarse one ~6 ms, and the component still sees 320x240)."""
-        max_range = component.parameters.MaxRange / 1000.0 * 1.25
-        model, k = DIGICLOPS_MODEL, STEREO_SUBSAMPLE
-        fov = math.degrees(2 * math.atan(0.5 * model.width / model.focal_px))
-
-        def render(t: float) -> np.ndarray:
-            pose = self._frame("Digiclops:ImagePlane")
-            coarse = depth_image(self.terrain, pose[:3, 3], pose[:3, :3], model.width // k,
-                                 model.height // k, fov, max_range)
-            h, w = coarse.shape
-            return np.broadcast_to(coarse[:, None, :, None], (h, k, w, k)).reshape(h * k, w * k)
-
-        return render
-
-    # -- running ---------------------------------------------------------------------------
-    async def _expose_devices(self) -> None:
-        """Serve each exposed emulator on a pseudo-terminal or a loopback TCP port and
-        point its component at it (through the real serial and TCP transports)."""
-        assert self._system is not None
-        devices = self._system.devices
-        loop = asyncio.get_running_loop()
-        ptys: dict[int, PtyDeviceStream] = {}
-        for name, (fake, kind) in self._exposed.items():
-            if kind == "serial":
-                pty = ptys.get(id(fake))
-                if pty is None:  # one terminal per emulated device (MPC555: two components)
-                    pty = ptys[id(fake)] = PtyDeviceStream()
-                    self._endpoints.append(pty)
-                    self._tasks.append(loop.create_task(fake.serve(pty)))
-
-                async def open_pty(spec: SerialSpec, path: str = pty.path) -> ByteStream:
-                    return await devices.open_serial(SerialSpec(path, spec.baudrate))
-
-                devices.overrides[name] = open_pty
-                log.info("%s: emulated on %s", name, pty.path)
-            else:
-                async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
-                                 fake: Any = fake) -> None:
-                    await fake.serve(AsyncioByteStream(reader, writer, "laser"))
+        async def open_socket(spec: TcpSpec) -> ByteStream:
+            port = self._shared.get(f"tcp:{name}")
+            if port is None:
+                async def handle(reader: asyncio.StreamReader,
+                                 writer: asyncio.StreamWriter) -> None:
+                    await fake.serve(AsyncioByteStream(reader, writer, "laser", self.clock))
 
                 server = await asyncio.start_server(handle, "127.0.0.1", 0)
-                self._endpoints.append(server)
-                port = server.sockets[0].getsockname()[1]
+                self._shared[f"server:{name}"] = server
+                port = self._shared[f"tcp:{name}"] = server.sockets[0].getsockname()[1]
+                self.endpoints[name] = f"127.0.0.1:{port}"
+                log.warning("%s: emulated on 127.0.0.1:%d", name, port)
+            return await open_tcp("127.0.0.1", port, clock=self.clock)
+        return open_socket  # type: ignore[return-value]
 
-                async def open_socket(spec: TcpSpec, port: int = port) -> ByteStream:
-                    return await open_tcp("127.0.0.1", port)
+    # -- running ---------------------------------------------------------------------------
+    @asynccontextmanager
+    async def running(self) -> AsyncIterator[RaptorSimulation]:
+        """Run the physics (and the world's drive script) in the attached system's task
+        group; at the end stop them (then stop the system and :meth:`aclose`). A failure
+        in the physics fails the system (``System.run`` raises TaskFailed)."""
+        system = self._system
+        if system is None:
+            raise RuntimeError("attach the simulation to a System before running it")
+        self._start = self.clock.monotonic()
+        tasks = [system.tasks.spawn(self._physics(), owner="simulation physics")]
+        if self.world.drive:
+            tasks.append(system.tasks.spawn(self._drive_script(), owner="simulation drive"))
+        try:
+            yield self
+        finally:
+            for task in tasks:
+                task.cancel()
+            for task in tasks:
+                try:
+                    await task
+                except (asyncio.CancelledError, Exception):  # reported by the task group
+                    pass
+            if self._observer is not None:
+                await self._observer.drain()
 
-                devices.overrides[name] = open_socket
-                log.info("%s: emulated on 127.0.0.1:%d", name, port)
-
-    async def __aenter__(self) -> RaptorSimulation:
-        self._start = self.clock.now()
-        loop = asyncio.get_running_loop()
-        self._tasks = [loop.create_task(self._physics(), name="afa-sim-physics")]
-        if self._exposed:
-            await self._expose_devices()
-        if self.world.drive and self._system is not None:
-            self._tasks.append(loop.create_task(self._drive_script(), name="afa-sim-drive"))
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            try:
-                await task
-            except asyncio.CancelledError:
-                pass
-            except Exception:
-                log.exception("simulation task failed")
+    async def aclose(self) -> None:
+        """Close the emulators and their endpoints (after the system has stopped, so no
+        driver reports its device lost)."""
         for fake in self.fakes:
             await fake.aclose()
-        for endpoint in self._endpoints:
-            if isinstance(endpoint, asyncio.AbstractServer):
+        for key, endpoint in list(self._shared.items()):
+            if key.startswith("server:"):
                 endpoint.close()
-            else:
+            elif key.startswith("pty:"):
                 await endpoint.close()
 
     @property
     def sim_time(self) -> float:
-        return self.clock.now() - self._start
+        return self.clock.monotonic() - self._start
 
     async def _physics(self) -> None:
         async for _ in self.clock.periodic(PHYSICS_STEP):
-            command = self._command
-            speed = 0.0 if command.brake else command.translation
+            translation, steering, brake = self._command
+            speed = 0.0 if brake else translation
             before = self.vehicle.collision
-            self.vehicle.step(PHYSICS_STEP, speed, math.degrees(command.steering), self.terrain)
+            self.vehicle.step(PHYSICS_STEP, speed, math.degrees(steering), self.terrain)
             collision = self.vehicle.collision
             if collision is not None and before is None:
                 record = {"time": round(self.sim_time, 3), "east": round(collision.east, 3),
@@ -356,11 +348,10 @@ class RaptorSimulation:
     async def _drive_script(self) -> None:
         """Tele-operation: the world's timed commands, sent as a joystick would."""
         assert self._system is not None
-        names = [c.name for c in self._system.components.values() if isinstance(c, VehicleControl)]
-        if not names:
+        control_name = served_name(self._system, VehicleControlInterface)
+        if control_name is None:
             log.warning("the world has a drive script but no VehicleControl is configured")
             return
-        control_name = self._system.components[names[0]].parameters.RaptorMotionEvent
         control = await self._system.resolve(VehicleControlInterface, control_name)
         while True:  # the controller link comes up a moment after the component
             try:

@@ -61,3 +61,15 @@ def test_components_take_time_from_the_injected_clock(path):
     text = path.read_text()
     assert "time" not in {n.split(".")[0] for n in imports(path)}, f"{path} imports time"
     assert "asyncio.sleep(" not in text.replace("asyncio.sleep(0)", ""), f"{path} sleeps"
+
+
+@pytest.mark.parametrize("path", modules("afa") + modules("components") + modules("idl"),
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_tasks_are_created_only_by_the_module_that_owns_them(path):
+    """Every task belongs to a task group (afa.tasks): no bare create_task,
+    ensure_future or asyncio.TaskGroup elsewhere."""
+    if path == ROOT / "afa" / "tasks.py":
+        return
+    text = path.read_text()
+    for call in ("create_task(", "ensure_future(", "asyncio.TaskGroup("):
+        assert call not in text, f"{path} calls {call}"

@@ -19,8 +19,8 @@ from typing import Any
 from pydantic import ValidationError
 
 from afa.config.miro import ParameterSet, Section, read_document
-from afa.config.parameters import Parameters, param, parameter_types
-from afa.errors import ConfigError
+from afa.config.parameters import Parameters, param
+from afa.errors import AfaError, ConfigError
 
 __all__ = [
     "Configuration", "load_configuration", "RobotParameters", "LauncherParameters",
@@ -59,6 +59,11 @@ class LauncherParameters(Parameters):
     Components: list[LauncherEntry] = param([], description="Components in start order")
 
 
+#: The framework's own sections, always known.
+_BUILTIN: dict[str, type[Parameters]] = {
+    model.miro_type: model for model in (RobotParameters, LauncherParameters)}
+
+
 @dataclass(frozen=True)
 class Configuration:
     """A validated configuration: ``sections[section][instance]`` -> parameters."""
@@ -67,6 +72,7 @@ class Configuration:
     robot: str
     sections: dict[str, dict[str, Parameters]]
     launcher: LauncherParameters
+    launcher_lines: tuple[int, ...] = ()  # the source line of each Launcher entry
 
     def parameters(self, section: str, instance: str = "") -> Parameters:
         return self.sections[section][instance or DEFAULT_INSTANCE]
@@ -83,19 +89,29 @@ class Configuration:
 
 
 def load_configuration(path: str | Path) -> Configuration:
-    """Read and validate ``path``; raises ConfigError listing every problem."""
+    """Read and validate ``path``; raises ConfigError listing every problem.
+
+    Parameter models are imported on demand (only those the file names; see
+    :mod:`afa.registry`), and every Launcher ``Type`` must be an installed component
+    type (checked without importing it).
+    """
+    from afa import registry  # plug-ins: imported on demand, never at import time
+
     document = read_document(path)
     path = document.path
-    types = parameter_types()
     problems: list[str] = []
     sections: dict[str, dict[str, Parameters]] = {}
     for section in document.sections.values():
         validated = sections[section.name] = {}
         for pset in _sets(section):
-            model = types.get(pset.type_name)
             where = _where(section.name, pset.instance)
+            try:
+                model = _BUILTIN.get(pset.type_name) or registry.load_parameters(pset.type_name)
+            except AfaError as exc:
+                problems.append(f"{path}:{pset.line}: {where}: {exc}")
+                continue
             if model is None:
-                hint = _suggest(pset.type_name, types)
+                hint = _suggest(pset.type_name, registry.parameter_type_names())
                 problems.append(f"{path}:{pset.line}: {where}: unknown parameter type "
                                 f"{pset.type_name!r}{hint}")
                 continue
@@ -109,16 +125,22 @@ def load_configuration(path: str | Path) -> Configuration:
         robot_params = sections["Robot"][DEFAULT_INSTANCE]
         robot = getattr(robot_params, "Name", robot)
     launcher = LauncherParameters()
+    launcher_lines: tuple[int, ...] = ()
     launcher_section = document.sections.get("Launcher")
     if launcher_section is not None and DEFAULT_INSTANCE in sections.get("Launcher", {}):
         launcher = sections["Launcher"][DEFAULT_INSTANCE]  # type: ignore[assignment]
         present = {name: {i or DEFAULT_INSTANCE for i in [*(
             [""] if sec.default is not None else []), *sec.instances]}
             for name, sec in document.sections.items()}
-        problems += _check_launcher(path, launcher_section, launcher, present)
+        problems += _check_launcher(path, launcher_section, launcher, present,
+                                    registry.component_types())
+        default = launcher_section.default
+        if default is not None:
+            launcher_lines = tuple(default.line_of(("Components", i))
+                                   for i in range(len(launcher.Components)))
     if problems:
         raise ConfigError(problems)
-    return Configuration(path, robot, sections, launcher)
+    return Configuration(path, robot, sections, launcher, launcher_lines)
 
 
 def _sets(section: Section) -> list[ParameterSet]:
@@ -174,9 +196,9 @@ def _fields_at(model: type[Parameters], loc: tuple[Any, ...]) -> list[str]:
 
 
 def _check_launcher(path: Path, section: Section, launcher: LauncherParameters,
-                    sections: dict[str, set[str]]) -> list[str]:
-    """Launcher references to sections and instances present in the file (a set that
-    is present but invalid has its own message already)."""
+                    sections: dict[str, set[str]], types: list[str]) -> list[str]:
+    """Launcher references to installed component types, and to sections and instances
+    present in the file (a set that is present but invalid has its own message)."""
     problems = []
     pset = section.default
     assert pset is not None
@@ -187,6 +209,11 @@ def _check_launcher(path: Path, section: Section, launcher: LauncherParameters,
         if entry.Name in names:
             problems.append(f"{path}:{line}: {where}: component name used twice")
         names.add(entry.Name)
+        if entry.Type not in types:
+            type_line = pset.line_of(("Components", index, "Type"))
+            problems.append(f"{path}:{type_line}: {where}: unknown component type "
+                            f"{entry.Type!r}{_suggest(entry.Type, types)}; installed types: "
+                            f"{', '.join(types)}")
         if not entry.Section:
             continue
         if entry.Section not in sections:

@@ -44,14 +44,12 @@ def _cell(text: str) -> str:
 def reference_markdown() -> str:
     """The whole reference document as Markdown."""
     from afa import registry
+    from afa.config import loader
 
-    packages = {"afa"}
-    for cls in registry.load_all().values():
-        for module in (cls.__module__, getattr(cls.Parameters, "__module__", "")):
-            packages.add(module.rpartition(".")[0] or module)
+    modules = {loader.__name__} | {m.__module__ for m in registry.load_all_parameters().values()}
+    # every model of those modules: the plug-ins' own and the structs nested in them
     models = {name: model for name, model in parameter_types().items()
-              if any(model.__module__ == p or model.__module__.startswith(p + ".")
-                     for p in packages)}
+              if model.__module__ in modules}
     lines = [
         "# Parameter reference",
         "",

@@ -6,7 +6,7 @@ from typing import Any
 
 from lxml import etree
 
-from afa.config.parameters import Parameters, parameter_types
+from afa.config.parameters import Parameters
 
 __all__ = ["defaults_document", "parameter_element"]
 
@@ -36,10 +36,9 @@ def defaults_document() -> str:
     one section per model (named after the model), in Miro's format."""
     from afa import registry
 
-    registry.load_all()
     root = etree.Element("config")
     root.append(etree.Comment(" every afa parameter model with its defaults "))
-    for type_name, model in sorted(parameter_types().items()):
+    for type_name, model in sorted(registry.load_all_parameters().items()):
         try:
             defaults = model()
         except Exception:  # a model with required fields (e.g. a launcher entry) has no default set

@@ -38,7 +38,6 @@ from pydantic import ValidationError
 
 from afa.codec import StreamDecoder
 from afa.component import PublishServerReactor
-from afa.events import Publisher
 from afa.polling import LatestSlot
 from afa.reactor import Backoff
 from afa.transport import ByteStream, DeviceSpec, SerialSpec
@@ -328,7 +327,7 @@ def nmea_epoch_to_idl(epoch: Epoch, velocity: _Velocity | None = None) -> GpsIDL
 # -------------------------------------------------------------------------- component
 
 
-class GpsSokkia(PublishServerReactor[GpsMessage]):
+class GpsSokkia(PublishServerReactor[GpsSokkiaParameters, GpsMessage]):
     """The Raptor's GPS component (seed §3.1.4); serves the ``Gps`` interface.
 
     Polls: ``getPosition`` (latest fix; EDevIO before the first one) and
@@ -339,18 +338,17 @@ class GpsSokkia(PublishServerReactor[GpsMessage]):
     is accepted for configuration compatibility: afa has one event channel.
     """
 
-    Parameters = GpsSokkiaParameters
     #: No message for 2 s (the receiver logs at 4 Hz) means the device is lost.
-    stale_after: ClassVar[float | None] = 2.0
+    stale_after = 2.0
     backoff: ClassVar[Backoff] = Backoff(initial=0.2, factor=2.0, maximum=5.0)
-
-    parameters: GpsSokkiaParameters
 
     def __init__(self, name: str = "Gps", parameters: GpsSokkiaParameters | None = None) -> None:
         super().__init__(name, parameters)
+        p = self.parameters
+        self._events = self.publishes(p.EventName, GpsIDL, enabled=p.Notify)
+        self.serves(GpsInterface, p.EventName)
         self._novatel = EpochCombiner({"BESTPOS", "BESTVEL", "BESTUTM"}, {"BESTPOS"})
         self._nmea = EpochCombiner({"GGA"}, {"GGA", "RMC"})
-        self._events: Publisher | None = None
         self._latest: LatestSlot[GpsIDL] | None = None
         self._novatel_seen: float | None = None
         self._velocity: tuple[float, _Velocity] | None = None
@@ -365,11 +363,7 @@ class GpsSokkia(PublishServerReactor[GpsMessage]):
 
     # -- PSR hooks ---------------------------------------------------------------------
     async def setup(self) -> None:
-        p = self.parameters
-        self._events = self.publisher(p.EventName) if p.Notify else None
         self._latest = self.slot("GPS fix")
-        self.serve(GpsInterface, p.EventName)
-        await super().setup()
 
     def device(self) -> DeviceSpec:
         return SerialSpec(self.parameters.Device, self.parameters.Baudrate)
@@ -392,20 +386,21 @@ class GpsSokkia(PublishServerReactor[GpsMessage]):
             await stream.write(command)
 
     def handle(self, message: GpsMessage) -> None:
-        now = self.clock.now()
+        now = self.clock.now()  # the fix's time stamp
         if isinstance(message, (BestPos, BestVel, BestUtm)):
-            self._novatel_seen = now
+            self._novatel_seen = self.clock.monotonic()
             key = (message.header.gps_week, round(message.header.gps_seconds * 1000))
             for epoch in self._novatel.add(message.header.name, key, message, now):
                 self._integrate(epoch, "novatel")
         elif isinstance(message, (Gga, Rmc, Vtg)):
-            if self._novatel_seen is not None and now - self._novatel_seen < NOVATEL_HOLD:
+            if (self._novatel_seen is not None
+                    and self.clock.monotonic() - self._novatel_seen < NOVATEL_HOLD):
                 self.ignored_nmea += 1
                 return
             utc = None if isinstance(message, Vtg) else message.utc_seconds
-            key = None if utc is None else round(utc * 1000)
+            nmea_key = None if utc is None else round(utc * 1000)
             kind = type(message).__name__.upper()
-            for epoch in self._nmea.add(kind, key, message, now):
+            for epoch in self._nmea.add(kind, nmea_key, message, now):
                 self._integrate(epoch, "nmea")
         elif isinstance(message, CommandResponse):
             if not message.ok:
@@ -443,13 +438,15 @@ class GpsSokkia(PublishServerReactor[GpsMessage]):
         carried = None
         if self._velocity is not None and epoch.time - self._velocity[0] <= VELOCITY_MAX_AGE:
             carried = self._velocity[1]
+        device_time: float | None
         try:
             if source == "novatel":
                 body = novatel_epoch_to_idl(epoch, carried)
                 device_time = self._novatel_time(epoch)
             else:
                 body = nmea_epoch_to_idl(epoch, carried)
-                device_time = None if epoch.key is None else float(epoch.key) / 1000.0  # type: ignore[arg-type]
+                device_time = (None if epoch.key is None
+                               else float(epoch.key) / 1000.0)  # type: ignore[arg-type]
         except (ValidationError, KeyError) as exc:
             self.rejected += 1
             self.log.warning("dropping a GPS epoch that does not fit GpsIDL: %s", exc)
@@ -461,8 +458,8 @@ class GpsSokkia(PublishServerReactor[GpsMessage]):
         self.source = source
         assert self._latest is not None
         self._latest.set(body)
-        if self._events is not None and self._due(epoch.time if device_time is None
-                                                  else device_time):
+        if self._events.enabled and self._due(epoch.time if device_time is None
+                                              else device_time):
             self._events.publish(body)
             self.published += 1
 

@@ -293,9 +293,10 @@ class FakeGps(FakeDevice[GpsCommand]):
         self._live = stream
         try:
             period = self.solution_period
-            now = self.clock.now()
+            now = self.clock.now()  # GPS time is wall time; solutions align to its grid
             start = math.ceil(now / period - 1e-9) * period
-            async for tick in self.clock.periodic(period, first=start):
+            first = self.clock.monotonic() + (start - now)
+            async for tick in self.clock.periodic(period, first=first):
                 t = start + tick * period
                 due = self._due(t)
                 if due:

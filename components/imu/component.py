@@ -32,7 +32,6 @@ from typing import Any, ClassVar
 from afa.codec import StreamDecoder
 from afa.component import PublishServerReactor
 from afa.errors import ETimeOut
-from afa.events import Publisher
 from afa.polling import LatestSlot
 from afa.reactor import Backoff
 from afa.transport import ByteStream, DeviceSpec, SerialSpec
@@ -95,7 +94,7 @@ def imu_idl(sample: EulerAccelRate, time: float) -> ImuIDL:
     )
 
 
-class Imu(PublishServerReactor[ImuReply]):
+class Imu(PublishServerReactor[ImuParameters, ImuReply]):
     """The Raptor's IMU component (seed §3.1.3); serves the ``Imu`` interface.
 
     Polls: ``getImuData`` (latest sample; EDevIO before the first one) and
@@ -103,18 +102,17 @@ class Imu(PublishServerReactor[ImuReply]):
     ``Notify`` false no events are published but polls are answered.
     """
 
-    Parameters = ImuParameters
     #: No sample for 1 s (the unit streams at tens of Hz) means the device is lost.
-    stale_after: ClassVar[float | None] = 1.0
+    stale_after = 1.0
     backoff: ClassVar[Backoff] = Backoff(initial=0.2, factor=2.0, maximum=5.0)
-
-    parameters: ImuParameters
 
     def __init__(self, name: str = "Imu", parameters: ImuParameters | None = None) -> None:
         super().__init__(name, parameters)
+        p = self.parameters
+        self._events = self.publishes(p.EventName, ImuIDL, enabled=p.Notify)
+        self.serves(ImuInterface, p.EventName)
         self._replies = ImuDecoder(accept={CMD_GYRO_STAB_EULER_ACCEL_RATE, CMD_SET_CONTINUOUS,
                                            CMD_READ_EEPROM})
-        self._events: Publisher | None = None
         self._latest: LatestSlot[ImuIDL] | None = None
         self._grid_start: float | None = None
         self._grid_slot = 0
@@ -124,11 +122,7 @@ class Imu(PublishServerReactor[ImuReply]):
 
     # -- PSR hooks ---------------------------------------------------------------------
     async def setup(self) -> None:
-        p = self.parameters
-        self._events = self.publisher(p.EventName) if p.Notify else None
         self._latest = self.slot("IMU sample")
-        self.serve(ImuInterface, p.EventName)
-        await super().setup()
 
     def device(self) -> DeviceSpec:
         return SerialSpec(self.parameters.Device, self.parameters.Baudrate)
@@ -152,12 +146,11 @@ class Imu(PublishServerReactor[ImuReply]):
 
     def handle(self, message: ImuReply) -> None:
         if isinstance(message, EulerAccelRate):
-            now = self.clock.now()
-            body = imu_idl(message, now)
+            body = imu_idl(message, self.clock.now())
             self.samples += 1
             assert self._latest is not None
             self._latest.set(body)
-            if self._events is not None and self._due(now):
+            if self._events.enabled and self._due(self.clock.monotonic()):
                 self._events.publish(body)
                 self.published += 1
         elif isinstance(message, ContinuousModeSet):
@@ -188,9 +181,9 @@ class Imu(PublishServerReactor[ImuReply]):
     # -- internals ---------------------------------------------------------------------
     async def _drain(self, stream: ByteStream) -> None:
         """Discard input until the line is quiet for QUIET_TIME (at most DRAIN_LIMIT)."""
-        deadline = self.clock.now() + DRAIN_LIMIT
+        deadline = self.clock.monotonic() + DRAIN_LIMIT
         discarded = 0
-        while self.clock.now() < deadline:
+        while self.clock.monotonic() < deadline:
             try:
                 async with self.clock.timeout(QUIET_TIME, "quiet line"):
                     discarded += len(await stream.read())

@@ -172,7 +172,7 @@ class FakeImu(FakeDevice[ImuCommand]):
         self.continuous = 0
         #: Continuous reports sent (all connections).
         self.reports = 0
-        self._power_on = clock.now()
+        self._power_on = clock.monotonic()
         self._pending: list[bytes] = []
         self._corrupt = 0
 
@@ -193,7 +193,7 @@ class FakeImu(FakeDevice[ImuCommand]):
 
     def timer_ticks(self) -> int:
         """The free-running 16-bit TimerTicks counter now."""
-        return int((self.clock.now() - self._power_on) / TIMER_TICK_SECONDS) & 0xFFFF
+        return int((self.clock.monotonic() - self._power_on) / TIMER_TICK_SECONDS) & 0xFFFF
 
     def measure(self) -> ImuTruth:
         """What the unit reports now: truth plus noise and gyro bias."""

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from afa import EOutOfBounds, Event, SubscribePublishServer
+from afa import ComponentError, EOutOfBounds, Event, SubscribePublishServer
 from components.model_server.geometry import GeometryModel
 from components.model_server.parameters import ModelServerParameters
 from components.model_server.pose_filter import (
@@ -43,11 +43,15 @@ ANTENNA_FRAME = "GpsAntenna:PhaseCenter"
 IMU_FRAME = "Imu:SensorCenter"
 
 
-class ModelServer(SubscribePublishServer):
-    """Geometry database + pose estimation (seed §3.2.4, Tables 19–21, A.8)."""
+#: Table A.8's IDL-type names, as the Subscriptions list spells them, and their types.
+SUBSCRIPTION_TYPES: dict[str, type[GpsIDL] | type[ImuIDL] | type[WheelDataIDL]] = {
+    "Gps": GpsIDL, "GpsIDL": GpsIDL, "Imu": ImuIDL, "ImuIDL": ImuIDL,
+    "Odometry": WheelDataIDL, "WheelDataIDL": WheelDataIDL, "WheelEventIDL": WheelDataIDL,
+    "RaptorOdometry": WheelDataIDL}
 
-    Parameters = ModelServerParameters
-    parameters: ModelServerParameters
+
+class ModelServer(SubscribePublishServer[ModelServerParameters]):
+    """Geometry database + pose estimation (seed §3.2.4, Tables 19–21, A.8)."""
 
     def __init__(self, name: str, parameters: ModelServerParameters | None = None) -> None:
         super().__init__(name, parameters)
@@ -55,6 +59,23 @@ class ModelServer(SubscribePublishServer):
         self.initial_utm: np.ndarray | None = None
         self.inputs = {"gps": 0, "imu": 0, "odometry": 0}
         self.poses_published = 0
+        # replaced in setup by the configured filter; an empty one until then
+        self.filter: PoseFilter | RawPose = RawPose("imu")
+        description = self.parameters.EventChannelDescription
+        self.publishers = [self.publishes(b.Name, PoseTransformIDL)
+                           for b in description.Publications]
+        for binding in description.OfferedNames:
+            if binding.Type == "Platform":
+                self.serves(Platform, binding.Name)
+        handlers = {GpsIDL: self._on_gps_event, ImuIDL: self._on_imu_event,
+                    WheelDataIDL: self._on_odometry_event}
+        for binding in description.Subscriptions:
+            body_type = SUBSCRIPTION_TYPES.get(binding.Type)
+            if body_type is None:
+                raise ComponentError(
+                    f"{name}: Subscriptions names IDL type {binding.Type!r} for "
+                    f"{binding.Name!r}; ModelServer fuses {', '.join(SUBSCRIPTION_TYPES)}")
+            self.subscribes(binding.Name, body_type, handlers[body_type], maxsize=64)
 
     # -- lifecycle ---------------------------------------------------------------------
     async def setup(self) -> None:
@@ -68,19 +89,12 @@ class ModelServer(SubscribePublishServer):
         offset = (float(antenna[0]), float(antenna[1]), float(antenna[2]))
         if p.UseRawPose:
             # GPS position with the IMU's attitude: the GPS track is erratic at low speed
-            self.filter: PoseFilter | RawPose = RawPose("imu", antenna_offset=offset)
+            self.filter = RawPose("imu", antenna_offset=offset)
         else:
             self.filter = PoseFilter(PoseFilterTuning(
                 fidget_delay=p.FidgetDelay, fidget_period=p.FidgetPeriod,
                 antenna_offset=offset))
         self.latest = self.slot("pose")
-        description = p.EventChannelDescription
-        self.publishers = [self.publisher(b.Name) for b in description.Publications]
-        for binding in description.OfferedNames:
-            if binding.Type == "Platform":
-                self.serve(Platform, binding.Name)
-        for binding in description.Subscriptions:
-            self.subscribe(binding.Name, self._integrate, maxsize=64)
 
     async def run(self) -> None:
         period = self.parameters.UpdatePeriod
@@ -89,16 +103,19 @@ class ModelServer(SubscribePublishServer):
                 self._publish()
 
     # -- pose ---------------------------------------------------------------------------
-    def _integrate(self, event: Event) -> None:
-        body, t = event.body, event.time
-        if isinstance(body, GpsIDL):
-            self._on_gps(t, body)
-        elif isinstance(body, ImuIDL):
-            self._on_imu(t, body)
-        elif isinstance(body, WheelDataIDL):
-            self._on_odometry(t, body)
-        else:
-            return
+    def _on_gps_event(self, event: Event) -> None:
+        self._on_gps(event.time, event.body)  # type: ignore[arg-type]
+        self._updated()
+
+    def _on_imu_event(self, event: Event) -> None:
+        self._on_imu(event.time, event.body)  # type: ignore[arg-type]
+        self._updated()
+
+    def _on_odometry_event(self, event: Event) -> None:
+        self._on_odometry(event.time, event.body)  # type: ignore[arg-type]
+        self._updated()
+
+    def _updated(self) -> None:
         if self.parameters.UpdatePeriod == 0:
             self._publish()
 
@@ -134,7 +151,7 @@ class ModelServer(SubscribePublishServer):
         if self.initial_utm is None:
             return None
         try:
-            transform = self.filter.transform(self.initial_utm)
+            transform = self.filter.transform(self.initial_utm.tolist())
         except PoseUnavailableError:
             return None
         return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()),

@@ -172,22 +172,23 @@ def clamp_velocity(velocity: VelocityIDL, limits: MotionLimits,
     return ClampedVelocity(translation_mm_s, rotation_mrad_s, target, limited)
 
 
-class VehicleControl(Mpc555Host):
+class VehicleControl(Mpc555Host[VehicleControlParameters]):
     """The Vehicle Control component (seed §3.5); see the module docstring."""
 
-    Parameters = VehicleControlParameters
     seq_start = 0
 
     def __init__(self, name: str, parameters: VehicleControlParameters | None = None) -> None:
         super().__init__(name, parameters)
-        p: VehicleControlParameters = self.parameters  # type: ignore[assignment]
+        p = self.parameters
         if len(p.PedalParam) > MAX_PEDAL_POINTS:
             raise ComponentError(f"{name}: PedalParam has {len(p.PedalParam)} breakpoints; "
                                  f"the MPC555 link carries at most {MAX_PEDAL_POINTS}")
         # The controller's default intervals; STATUS (500 ms) bounds the gap between
         # frames whatever WheelDistRepTime Wheel Odometry configures.
-        self.stale_after = link_timeout(_CONTROLLER_DEFAULT_WHEEL_MS,  # type: ignore[misc]
+        self.stale_after = link_timeout(_CONTROLLER_DEFAULT_WHEEL_MS,
                                         _CONTROLLER_DEFAULT_SPEED_MS, STATUS_INTERVAL_MS)
+        self.events = self.publishes(p.RaptorMotionEvent, VelocityDataIDL)
+        self.serves(VehicleControlInterface, p.RaptorMotionEvent)
         self.limits = MotionLimits.from_parameters(p)
         self.control_counters: dict[str, int] = dict.fromkeys(
             ("velocity_commands", "ignored_velocity_commands", "limited_commands",
@@ -204,17 +205,14 @@ class VehicleControl(Mpc555Host):
         self._last_motion: float | None = None  # the command watchdog is armed when set
 
     async def setup(self) -> None:
-        p: VehicleControlParameters = self.parameters  # type: ignore[assignment]
+        await super().setup()
         self._reset_state()
         self._motion = asyncio.Event()
-        self.events = self.publisher(p.RaptorMotionEvent)
-        self.serve(VehicleControlInterface, p.RaptorMotionEvent)
-        await super().setup()
         self.spawn(self._heartbeat(), f"{self.name}:heartbeat")
         self.spawn(self._command_watchdog(), f"{self.name}:command-watchdog")
 
     def configuration(self) -> list[Command]:
-        p: VehicleControlParameters = self.parameters  # type: ignore[assignment]
+        p = self.parameters
         return [
             SetLimits(min(round(p.MaxTransVelocity), _I16),
                       min(round(p.MaxRotVelocity * 1000.0), _I16),
@@ -323,7 +321,7 @@ class VehicleControl(Mpc555Host):
         self._target = clamped.target
         if joystick:
             self.joystick_override = True
-        self._last_motion = self.clock.now()
+        self._last_motion = self.clock.monotonic()
         self._motion.set()
 
     # -- background tasks ----------------------------------------------------------------
@@ -332,7 +330,7 @@ class VehicleControl(Mpc555Host):
         is silent after a (re)connection."""
         clock = self.clock
         while True:
-            now = clock.now()
+            now = clock.monotonic()
             if self.last_tx is not None and now < self.last_tx + HEARTBEAT_INTERVAL:
                 await clock.sleep_until(self.last_tx + HEARTBEAT_INTERVAL)
                 continue
@@ -349,15 +347,14 @@ class VehicleControl(Mpc555Host):
 
     async def _command_watchdog(self) -> None:
         """Stop the vehicle when the velocity commands stop coming."""
-        p: VehicleControlParameters = self.parameters  # type: ignore[assignment]
-        interval = p.CommandWatchdog
+        interval = self.parameters.CommandWatchdog
         while True:
             last = self._last_motion
             if last is None:
                 self._motion.clear()
                 await self._motion.wait()
                 continue
-            if self.clock.now() < last + interval:
+            if self.clock.monotonic() < last + interval:
                 await self.clock.sleep_until(last + interval)
                 continue
             self.control_counters["watchdog_stops"] += 1

@@ -42,6 +42,7 @@ import numpy as np
 from afa.clock import Clock, TimerHandle
 from afa.errors import EDevIO
 from afa.fake import FakeDevice
+from afa.tasks import spawn
 from afa.transport import ByteStream, MemoryByteStream
 from components.mpc555.codec import (
     CONTROLLER_WATCHDOG_MS,
@@ -283,7 +284,7 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
 
     # -- controller state ----------------------------------------------------------------
     def _reset_state(self) -> None:
-        now = self.clock.now()
+        now = self.clock.monotonic()
         self._boot = now
         self._seq = SequenceCounter()
         self.settings = _Settings()
@@ -409,8 +410,8 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
             try:
                 if isinstance(stream, MemoryByteStream):
                     stream.write_nowait(data)
-                else:  # pragma: no cover - factory() always makes memory pipes
-                    task = asyncio.get_running_loop().create_task(stream.write(data))
+                else:  # a pseudo-terminal (the simulator's --expose): write in a task
+                    task = spawn(stream.write(data), owner=f"fake {self.name}")
                     self._tasks.add(task)
                     task.add_done_callback(self._tasks.discard)
             except EDevIO:
@@ -446,11 +447,11 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
 
     # -- periodic reports and the watchdog -----------------------------------------------
     def _time_ms(self) -> int:
-        return round((self.clock.now() - self._boot) * 1000.0) & 0xFFFFFFFF
+        return round((self.clock.monotonic() - self._boot) * 1000.0) & 0xFFFFFFFF
 
     def _schedule_reports(self) -> None:
         reports = self.settings.reports
-        start = self.clock.now()
+        start = self.clock.monotonic()
         for kind, interval_ms in (("wheel", reports.wheel_distance_ms),
                                   ("speed", reports.speed_ms), ("status", reports.status_ms)):
             old = self._timers.pop(kind, None)
@@ -503,7 +504,7 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
             self.drive_command().pedal, max(0, min(1023, round(sensor)))))
 
     def _send_status(self) -> None:
-        now = self.clock.now()
+        now = self.clock.monotonic()
         age = 65535 if self._last_host_frame is None else min(
             65535, round((now - self._last_host_frame) * 1000.0))
         errors = sum(d.stats.checksum_failures + d.stats.malformed for d in self._decoders)
@@ -521,7 +522,7 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
         del self._timers["watchdog"]
         if not self.started or self._last_host_frame is None:
             return
-        silence = self.clock.now() - self._last_host_frame
+        silence = self.clock.monotonic() - self._last_host_frame
         if silence < CONTROLLER_WATCHDOG_MS / 1000.0 - 1e-9:
             self._arm_watchdog()
             return
@@ -534,8 +535,8 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
     async def on_command(self, command: Packet[Command], stream: ByteStream) -> None:
         self._power_on()
         message = command.message
-        self.received.append(ReceivedCommand(self.clock.now(), command.seq, message))
-        self._last_host_frame = self.clock.now()
+        self.received.append(ReceivedCommand(self.clock.monotonic(), command.seq, message))
+        self._last_host_frame = self.clock.monotonic()
         result = self._execute(message)
         if not self.mute_acks:
             self._send_report(CommandAck(command.seq, message.TYPE, result))

@@ -23,9 +23,10 @@ from __future__ import annotations
 
 import asyncio
 import math
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, Protocol, TypeVar, cast
 
 from afa.component import PublishServerReactor
+from afa.config.parameters import Parameters
 from afa.errors import EDevIO, ETimeOut
 from afa.polling import LatestSlot
 from afa.transport import ByteStream, DeviceSpec, SerialSpec
@@ -45,7 +46,10 @@ from components.mpc555.codec import (
     encode_command,
     next_seq,
 )
-from components.mpc555.parameters import SteerCalibration, WheelOdometryParameters
+from components.mpc555.parameters import (
+    SteerCalibration,
+    WheelOdometryParameters,
+)
 from idl import Odometry, TimeIDL, WheelDataIDL, WheelEventIDL
 
 __all__ = [
@@ -83,7 +87,18 @@ def steer_calibration(steer: SteerCalibration) -> SetSteerCalibration:
     return SetSteerCalibration(steer.Center, round(steer.Gain * 1e6), steer.Min, steer.Max)
 
 
-class Mpc555Host(PublishServerReactor[Packet[Report]]):
+#: The parameter models of the two components that share the MPC555 link.
+LinkParameters = TypeVar("LinkParameters", bound=Parameters)
+
+
+class _SerialLink(Protocol):
+    """What both link parameter models say about the serial port."""
+
+    Device: str
+    Baudrate: int
+
+
+class Mpc555Host(PublishServerReactor[LinkParameters, Packet[Report]], Generic[LinkParameters]):
     """Host side of the MPC555 link shared by Wheel Odometry and Vehicle Control.
 
     Subclasses provide :meth:`configuration` (the commands sent after every connection
@@ -97,7 +112,7 @@ class Mpc555Host(PublishServerReactor[Packet[Report]]):
     #: counters apart.
     seq_start: ClassVar[int] = 0
 
-    def __init__(self, name: str, parameters: Any = None) -> None:
+    def __init__(self, name: str, parameters: LinkParameters | None = None) -> None:
         super().__init__(name, parameters)
         self._seq = SequenceCounter(self.seq_start)
         self._pending: dict[tuple[int, int], asyncio.Future[AckResult]] = {}
@@ -130,8 +145,8 @@ class Mpc555Host(PublishServerReactor[Packet[Report]]):
 
     # -- PublishServerReactor hooks ------------------------------------------------------
     def device(self) -> DeviceSpec:
-        p = self.parameters
-        return SerialSpec(p.Device, p.Baudrate)  # type: ignore[union-attr]
+        p = cast(_SerialLink, self.parameters)
+        return SerialSpec(p.Device, p.Baudrate)
 
     def decoder(self) -> Mpc555Decoder:
         return Mpc555Decoder()
@@ -141,7 +156,6 @@ class Mpc555Host(PublishServerReactor[Packet[Report]]):
         self.configured = self.configuring = self.link_up = False
         self.ready.clear()
         self._configure_task = None
-        await super().setup()
 
     async def on_connect(self, stream: ByteStream) -> None:
         # Reading starts only after this returns, so the configuration (which waits for
@@ -184,7 +198,7 @@ class Mpc555Host(PublishServerReactor[Packet[Report]]):
         Raises EDevIO while the device is not connected.
         """
         await self.send(encode_command(command, self._seq.next()))
-        self.last_tx = self.clock.now()
+        self.last_tx = self.clock.monotonic()
 
     async def command(self, command: Command, *, retries: int = COMMAND_RETRIES) -> AckResult:
         """Send ``command`` and wait for its ACK, retransmitting it with the same SEQ up to
@@ -204,7 +218,7 @@ class Mpc555Host(PublishServerReactor[Packet[Report]]):
                 if attempt:
                     self.link_counters["retransmissions"] += 1
                 await self.send(frame)
-                self.last_tx = self.clock.now()
+                self.last_tx = self.clock.monotonic()
                 try:
                     async with self.clock.timeout(ACK_TIMEOUT, "MPC555 ACK"):
                         result = await asyncio.shield(future)
@@ -280,7 +294,7 @@ def _signed32(value: int) -> int:
     return (value + 0x8000_0000) % 0x1_0000_0000 - 0x8000_0000
 
 
-class WheelOdometry(Mpc555Host):
+class WheelOdometry(Mpc555Host[WheelOdometryParameters]):
     """The Wheel Odometry component (seed §3.1.5): a Publish Server and Reactor.
 
     Distances are cumulative front-wheel travel in metres since the controller first
@@ -293,28 +307,25 @@ class WheelOdometry(Mpc555Host):
     this component sends).
     """
 
-    Parameters = WheelOdometryParameters
     seq_start = 0x80
 
     def __init__(self, name: str, parameters: WheelOdometryParameters | None = None) -> None:
         super().__init__(name, parameters)
-        p: WheelOdometryParameters = self.parameters  # type: ignore[assignment]
-        self.stale_after = link_timeout(p.WheelDistRepTime, p.SpeedRepTime,  # type: ignore[misc]
-                                        STATUS_INTERVAL_MS)
+        p = self.parameters
+        self.stale_after = link_timeout(p.WheelDistRepTime, p.SpeedRepTime, STATUS_INTERVAL_MS)
+        self.events = self.publishes(p.RaptorOdometryEvent, WheelEventIDL)
+        self.serves(Odometry, p.RaptorOdometryEvent)
         self._total = [0, 0]  # cumulative counts, host side, left and right
         self._previous: tuple[int, int, int] | None = None  # time_ms, left, right
         self._steering = 0.0
         self._sequence = 0
 
     async def setup(self) -> None:
-        p: WheelOdometryParameters = self.parameters  # type: ignore[assignment]
-        self.events = self.publisher(p.RaptorOdometryEvent)
-        self.latest: LatestSlot[WheelEventIDL] = self.slot("wheel odometry")
-        self.serve(Odometry, p.RaptorOdometryEvent)
         await super().setup()
+        self.latest: LatestSlot[WheelEventIDL] = self.slot("wheel odometry")
 
     def configuration(self) -> list[Command]:
-        p: WheelOdometryParameters = self.parameters  # type: ignore[assignment]
+        p = self.parameters
         return [ConfigureReports(p.WheelDistRepTime, p.SpeedRepTime, STATUS_INTERVAL_MS),
                 wheel_calibration(p.LfdParam, p.RfdParam),
                 steer_calibration(p.SteerParam)]
@@ -331,7 +342,7 @@ class WheelOdometry(Mpc555Host):
         # STATUS and the rest belong to Vehicle Control.
 
     def _wheel_distance(self, report: WheelDistanceReport) -> None:
-        p: WheelOdometryParameters = self.parameters  # type: ignore[assignment]
+        p = self.parameters
         previous = self._previous or (report.time_ms, 0, 0)
         left_delta = _signed32(report.left_counts - previous[1])
         right_delta = _signed32(report.right_counts - previous[2])

@@ -235,7 +235,7 @@ class _ScanLine:
                                   points=points)
 
 
-class NodLaser(PublishServerReactor[ControllerMessage]):
+class NodLaser(PublishServerReactor[NodLaserParameters, ControllerMessage]):
     """One nodding SICK LMS 211 (an instance of Table A.1: ``Laser11``, ``Laser12``).
 
     ``adaptive_nodding`` switches the adaptive rule of :func:`nod_plan` on (default off:
@@ -243,11 +243,9 @@ class NodLaser(PublishServerReactor[ControllerMessage]):
     pass ``adaptive_nodding=True`` or set the class attribute.
     """
 
-    Parameters = NodLaserParameters
-    parameters: NodLaserParameters
     #: Seconds without a decoded frame before the controller counts as lost (the
     #: controller flags its own LMS link after 100 ms; scans come every 13-53 ms).
-    stale_after: ClassVar[float | None] = 1.0
+    stale_after = 1.0
     backoff: ClassVar[Backoff] = Backoff(initial=0.2, factor=2.0, maximum=5.0)
     adaptive_nodding: ClassVar[bool] = False
 
@@ -272,6 +270,9 @@ class NodLaser(PublishServerReactor[ControllerMessage]):
         self.controller_status: ControllerStatus | None = None
         self.counters = {"scans": 0, "scans_lost": 0, "scans_rejected": 0,
                          "commands_rejected": 0, "array_events": 0, "seq_events": 0}
+        self.events = self.publishes(p.EventName, Range3dSeqEventIDL)
+        self.array_events = self.publishes(self.array_event_name, Range3dLaserIDL)
+        self.serves(Range3dSensor, p.EventName)
 
     @property
     def array_event_name(self) -> str:
@@ -284,11 +285,7 @@ class NodLaser(PublishServerReactor[ControllerMessage]):
         if p.LaserID not in LASER_FRAMES:
             self.log.warning("LaserID %d has no Table A.6 frame; points are in %s",
                              p.LaserID, self.frame)
-        self.events = self.publisher(p.EventName)
-        self.array_events = self.publisher(self.array_event_name)
         self.latest = self.slot("laser scan line")
-        self.serve(Range3dSensor, p.EventName)
-        await super().setup()
 
     def device(self) -> DeviceSpec:
         return TcpSpec(self.parameters.Host, self.parameters.Port)

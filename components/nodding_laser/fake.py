@@ -160,7 +160,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
         self.waveform = Waveform(waveform)
         self.noise_m = noise_m
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.boot = clock.now()
+        self.boot = clock.monotonic()
         # controller state (firmware defaults: Table A.1's values, holding level)
         self.rate_deg_s = 15.0
         self.low_deg = -40.0
@@ -238,7 +238,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
         return m.state
 
     def _set_motion(self, state: ControllerState, target: float = 0.0) -> None:
-        now = self.clock.now()
+        now = self.clock.monotonic()
         angle = self.angle_at(now)
         rising = True
         if state is ControllerState.NODDING and self.motion.state is ControllerState.NODDING:
@@ -251,7 +251,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
 
     async def on_command(self, command: HostCommand, stream: ByteStream) -> None:
         result = AckResult.OK
-        before = self._state_at(self.clock.now())
+        before = self._state_at(self.clock.monotonic())
         if isinstance(command, SetNodRate):
             if command.rate_udeg_per_s <= 0:
                 result = AckResult.BAD_ARGUMENT
@@ -273,7 +273,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
             self._set_motion(ControllerState.MOVING, command.angle_udeg / 1e6)
         elif isinstance(command, SickCommand):
             result = await self._forward_to_lms(command, stream)
-        if isinstance(command, RequestStatus) or self._state_at(self.clock.now()) != before:
+        if isinstance(command, RequestStatus) or self._state_at(self.clock.monotonic()) != before:
             await self._send(stream, self._status())
         await self._send(stream, CommandAck(_COMMAND_TYPES[type(command)], command.seq, result,
                                             self._next_seq()))
@@ -281,7 +281,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
     async def produce(self, stream: ByteStream) -> None:
         self._current.append(stream)
         try:
-            deadline = self.clock.now()
+            deadline = self.clock.monotonic()
             while True:
                 period = self.scan_period
                 deadline += period
@@ -318,7 +318,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
                 self.streaming = False  # the LMS stops streaming on a variant change
             reply = VariantReply(accepted, *self.variant, 0x10)
         elif isinstance(sick, RequestMeasuredValues):
-            now = self.clock.now()
+            now = self.clock.monotonic()
             reply = self._measure(now - self.scan_period, now)[1]
         else:
             ack = NAK  # commands this LMS model does not implement
@@ -358,7 +358,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
 
     # -- controller frames ---------------------------------------------------------------------
     def _status(self) -> ControllerStatus:
-        now = self.clock.now()
+        now = self.clock.monotonic()
         return ControllerStatus(self._state_at(now), self.faults, round(self.angle_at(now) * 1e6),
                                 round(self.low_deg * 1e6), round(self.high_deg * 1e6),
                                 round(self.rate_deg_s * 1e6),

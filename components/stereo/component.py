@@ -100,7 +100,7 @@ class StereoScan:
         return self._static
 
 
-class Stereo(SubscribePublishServer):
+class Stereo(SubscribePublishServer[StereoParameters]):
     """Publishes ``Raptor/<EventName>`` (:class:`~idl.Range3dArrayEventIDL`) at
     ``frameRate`` and serves :class:`~idl.Range3dSensor` under ``EventName``.
 
@@ -109,16 +109,15 @@ class Stereo(SubscribePublishServer):
     5 s (``getWait``).
     """
 
-    Parameters = StereoParameters
     #: Reopen delays after a camera failure (clock seconds).
     backoff: ClassVar[Backoff] = Backoff(initial=0.5, factor=2.0, maximum=10.0)
     #: The camera the component asks for (the seed runs the Digiclops at 320x240).
     camera_model_name: ClassVar[str] = "PointGreyDigiclops"
 
-    parameters: StereoParameters
-
     def __init__(self, name: str, parameters: StereoParameters | None = None) -> None:
         super().__init__(name, parameters)
+        self.events = self.publishes(self.parameters.EventName, Range3dArrayEventIDL)
+        self.serves(Range3dSensor, self.parameters.EventName)
         self.latest: LatestSlot[StereoScan] | None = None
         self.backend: CameraBackend | None = None
         self._counters = {"frames": 0, "points": 0, "opens": 0, "open_failures": 0,
@@ -147,10 +146,7 @@ class Stereo(SubscribePublishServer):
 
     # -- lifecycle ---------------------------------------------------------------------
     async def setup(self) -> None:
-        p = self.parameters
-        self.events = self.publisher(p.EventName)
         self.latest = self.slot("stereo frame")
-        self.serve(Range3dSensor, p.EventName)
 
     async def run(self) -> None:
         """Open the camera, capture at ``frameRate``; on failure reopen with backoff."""

@@ -429,7 +429,8 @@ async def test_through_a_pseudo_terminal_with_pyserial_asyncio():
     serving = asyncio.create_task(fake.serve(stream))
     imu = Imu("Imu", ImuParameters(Device=stream.path, Baudrate=38400))
     try:
-        async with System([imu], clock=clock) as system:  # no device override
+        # no device override: the driver opens the pseudo-terminal as a real serial port
+        async with System([imu], clock=clock, real_devices=True) as system:
             events = system.channel.subscribe("Raptor", "Imu", maxsize=100)
             first = await asyncio.wait_for(events.get(), 5.0)
             second = await asyncio.wait_for(events.get(), 5.0)

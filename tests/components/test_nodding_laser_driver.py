@@ -426,7 +426,8 @@ async def test_the_driver_talks_to_the_fake_through_a_real_tcp_socket():
     port = server.sockets[0].getsockname()[1]
     component = laser(Host="127.0.0.1", Port=port)
     try:
-        async with System([component], clock=clock) as system:
+        # a loopback socket made for the test: the real TCP transport, on purpose
+        async with System([component], clock=clock, real_devices=True) as system:
             proxy = await system.resolve(Range3dSensor, "Laser11")
             async with asyncio.timeout(10):
                 scan = await proxy.get3dSeqWaitFullScan()

@@ -1,6 +1,7 @@
 """``python -m afa``: help, run (honest about what exists), exit codes."""
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -56,7 +57,9 @@ def test_real_device_mode_reports_absent_devices_as_unhealthy(tmp_path):
     summary = tmp_path / "summary.json"
     result = subprocess.run(
         [sys.executable, "-m", "afa", "run", str(config), "--duration", "1", "--summary",
-         str(summary)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+         str(summary)], capture_output=True, text=True, timeout=120, cwd=tmp_path,
+        # every device this file names is absent or refused: real-device mode, safely
+        env={k: v for k, v in os.environ.items() if k != "AFA_FORBID_REAL_DEVICES"})
     assert result.returncode == 0, result.stderr
     components = json.loads(summary.read_text())["components"]
     for name in ("3dmgService", "GpsSokkiaService", "RaptorService", "NodLaserService"):

@@ -170,3 +170,114 @@ async def test_settle_runs_ready_work_without_moving_time():
     await clock.settle()
     assert done == [50]
     assert clock.now() == 0.0
+
+
+# -- stamps and intervals, pacing, real I/O, the scaled clock (decision 0006) -------------
+
+
+async def test_a_wall_clock_step_fires_no_watchdog_and_no_timer():
+    clock = VirtualClock(start=1000.0)
+    fired = []
+    clock.call_later(5.0, lambda: fired.append(clock.monotonic()))
+    stamps = []
+
+    async def fed_watchdog():
+        async with clock.watchdog(0.5, "feed") as dog:
+            for _ in range(20):
+                await clock.sleep(0.1)
+                stamps.append(clock.now())
+                if len(stamps) == 5:
+                    clock.step_wall(3600.0)  # NTP or GPS corrects the wall clock
+                if len(stamps) == 10:
+                    clock.step_wall(-7200.0)
+                dog.feed()
+
+    await fed_watchdog()  # never fired, though the stamps jumped an hour each way
+    assert stamps[5] - stamps[4] == pytest.approx(3600.1)
+    assert stamps[10] - stamps[9] == pytest.approx(-7199.9)
+    await clock.advance(5.0)
+    assert fired == [pytest.approx(5.0)]  # the timer kept its interval
+
+
+async def test_the_wall_clock_takes_stamps_from_its_source_and_intervals_elsewhere():
+    stamp = [1e9]
+    clock = WallClock(time_source=lambda: stamp[0])
+    before = clock.monotonic()
+    stamp[0] += 3600.0
+    assert clock.now() == 1e9 + 3600.0
+    assert clock.monotonic() - before < 60.0  # the step did not move the interval base
+
+
+async def test_a_virtual_timeout_around_a_socket_that_answers_does_not_fire():
+    """Pending real I/O is not idleness: virtual time waits for the socket (paced at
+    real time) instead of jumping to the 5 s deadline."""
+    from afa.transport import open_tcp
+
+    async def answer(reader, writer):
+        await reader.read(1)
+        await asyncio.sleep(0.05)  # the server's own latency (real time, test side)
+        writer.write(b"pong")
+        await writer.drain()
+        writer.close()
+
+    server = await asyncio.start_server(answer, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    clock = VirtualClock(start=0.0)
+    try:
+        stream = await open_tcp("127.0.0.1", port, clock=clock)
+        await stream.write(b"p")
+        async with clock.timeout(5.0, "pong"):
+            reply = await stream.read()
+        assert reply == b"pong"
+        assert clock.monotonic() < 5.0  # the deadline was not reached
+        await stream.close()
+    finally:
+        server.close()
+
+
+async def test_a_paced_clock_runs_no_faster_than_its_real_time_factor():
+    loop = asyncio.get_running_loop()
+    clock = VirtualClock(start=0.0, pace=20.0)
+    wall = loop.time()
+    await clock.sleep(2.0)  # 2 virtual seconds at 20x: at least 0.1 s of real time
+    assert loop.time() - wall >= 0.09
+    assert clock.monotonic() == pytest.approx(2.0)
+
+
+async def test_pause_resume_and_step():
+    clock = VirtualClock(start=0.0)
+    ticks = []
+
+    async def ticker():
+        async for tick in clock.periodic(1.0):
+            ticks.append(tick)
+
+    task = asyncio.get_running_loop().create_task(ticker())
+    await clock.advance(2.5)
+    assert ticks == [0, 1, 2]
+    clock.pause()
+    for _ in range(50):
+        await asyncio.sleep(0)  # the loop is idle, yet paused time does not move
+    assert clock.monotonic() == 2.5 and ticks == [0, 1, 2]
+    await clock.run_for(1.0)  # a step while paused
+    assert clock.monotonic() == 3.5 and ticks == [0, 1, 2, 3]
+    assert clock.paused
+    clock.resume()
+    await clock.sleep(1.0)
+    assert ticks == [0, 1, 2, 3, 4]
+    task.cancel()
+
+
+async def test_the_scaled_clock_changes_speed_and_starts_paused_on_request():
+    from afa import ScaledClock
+
+    clock = ScaledClock(start=0.0, speed=None, paused=True)
+    assert clock.paused and clock.pace is None
+    await clock.advance(3.0)  # a step of three seconds
+    assert clock.monotonic() == 3.0
+    clock.pace = 50.0
+    clock.resume()
+    loop = asyncio.get_running_loop()
+    wall = loop.time()
+    await clock.sleep(1.0)
+    assert loop.time() - wall >= 0.015  # at most 50x real time

@@ -7,6 +7,7 @@ import pydantic
 import pytest
 
 from afa import ChannelClosed, Event, EventChannel, Overflow, VirtualClock
+from idl import wire
 from idl._base import Array, IDLModel, field
 
 
@@ -136,23 +137,40 @@ def test_bodies_are_immutable_so_fan_out_shares_them_safely():
 def test_events_serialise_losslessly_with_arrays():
     channel = EventChannel(VirtualClock(start=1.5))
     points = np.arange(12, dtype=np.float32).reshape(4, 3) / 7
-    event = channel.publish("Raptor", "Laser11", Cloud(points=points))
-    back = Event.from_json(event.to_json())
-    assert back == event
+    event = channel.publish("Raptor", "Laser11", Cloud(points=points), origin="NodLaser")
+    back = Event.decode(event.encode())
+    assert back == event and back.origin == "NodLaser"
     assert back.body.points.dtype == np.float32
     assert np.array_equal(back.body.points, points)
 
 
-def test_taps_see_every_event_even_when_subscriptions_drop():
+def test_a_damaged_event_raises_wire_error_only():
+    event = EventChannel().publish("Raptor", "T", Sample(value=1))
+    data = event.encode()
+    for cut in range(len(data)):
+        with pytest.raises(wire.WireError):
+            Event.decode(data[:cut])
+
+
+def test_an_observer_has_its_own_buffer_and_counts_what_it_drops():
     channel = EventChannel()
-    seen = []
-    remove = channel.add_tap(seen.append)
-    channel.subscribe("R", "T", maxsize=1)
-    for i in range(3):
+    observer = channel.observe(maxsize=2)
+    fast = channel.subscribe("R", "T", maxsize=100)
+    for i in range(5):
         channel.publish("R", "T", Sample(value=i))
-    remove()
-    channel.publish("R", "T", Sample(value=9))
-    assert [e.body.value for e in seen] == [0, 1, 2]
+    assert [e.body.value for e in _drain(observer)] == [3, 4]
+    assert observer.statistics().dropped == 3
+    assert len(_drain(fast)) == 5 and fast.statistics().dropped == 0
+    assert channel.counts() == {"T": 5}
+
+
+def test_injected_events_keep_their_time_and_origin():
+    channel = EventChannel(VirtualClock(start=100.0))
+    sub = channel.subscribe("Raptor", "Gps")
+    remote = Event("Raptor", "Gps", 12.5, 77, Sample(value=3), "other/GpsSokkia")
+    delivered = channel.inject(remote)
+    assert (delivered.time, delivered.origin, delivered.seq) == (12.5, "other/GpsSokkia", 1)
+    assert _drain(sub) == [delivered]
 
 
 def _drain(sub):

@@ -11,8 +11,15 @@ from afa import (
     ETimeOut,
     InterfaceError,
     LatestSlot,
+    LocalInvoker,
+    NameNotFound,
+    NameRegistry,
+    PollLayer,
     Servant,
+    SubscribePublishServer,
+    System,
     VirtualClock,
+    polling,
     proxy_for,
 )
 from idl._base import IDLModel, Interface, field
@@ -68,8 +75,13 @@ class SensorServer:
 
 
 def make(clock, **kw):
+    """A server bound at Raptor/Sensor and a proxy through the standard middleware."""
     server = SensorServer(clock)
-    proxy = proxy_for(Sensor, Servant(Sensor, server, name="Raptor/Sensor"), clock, **kw)
+    registry = NameRegistry(clock)
+    registry.bind("Raptor/Sensor", Servant(Sensor, server, name="Raptor/Sensor"))
+    layer = PollLayer(clock)
+    proxy = proxy_for(Sensor, LocalInvoker(registry, "Raptor/Sensor", Sensor),
+                      middleware=layer.middleware, **kw)
     return server, proxy
 
 
@@ -158,8 +170,166 @@ def test_a_servant_must_implement_every_method():
         Servant(Sensor, Half())
 
 
-def test_a_proxy_for_the_wrong_interface_is_refused():
+async def test_a_proxy_for_the_wrong_interface_is_refused():
     clock = VirtualClock()
-    servant = Servant(Sensor, SensorServer(clock))
+    registry = NameRegistry(clock)
+    registry.bind("Raptor/Sensor", Servant(Sensor, SensorServer(clock)))
     with pytest.raises(InterfaceError):
-        proxy_for(Other, servant, clock)
+        proxy_for(Other, LocalInvoker(registry, "Raptor/Sensor", Sensor))
+    proxy = proxy_for(Other, LocalInvoker(registry, "Raptor/Sensor", Other))
+    with pytest.raises(InterfaceError, match="serves Sensor, not Other"):
+        await proxy.ping()
+
+
+# -- polls ready for a network (the invoker seam, names, middleware, wire form) -----------
+
+
+class SensorComponent(SubscribePublishServer):
+    def __init__(self, name):
+        super().__init__(name)
+        self.serves(Sensor, "Sensor")
+        self.reading = 0.0
+
+    async def setup(self):
+        self.latest = self.slot("reading")
+        self.latest.set(Reading(value=self.reading))
+
+    async def getReading(self):
+        return self.latest.get()
+
+    async def getWaitReading(self):
+        return await self.latest.wait_next(Sensor.wait_timeout)
+
+    async def setGain(self, gain):
+        return True
+
+
+async def test_an_old_proxy_never_returns_a_stopped_servers_data_and_follows_a_restart():
+    clock = VirtualClock(start=0.0)
+    server = SensorComponent("SensorServer")
+    server.reading = 1.0
+    async with System([server], clock=clock) as system:
+        proxy = await system.resolve(Sensor, "Sensor")
+        assert (await proxy.getReading()).value == 1.0
+        await system.stop_component("SensorServer")
+        with pytest.raises(NameNotFound, match="not running"):
+            await proxy.getReading()
+        server.reading = 2.0
+        await system.start_component("SensorServer")
+        assert (await proxy.getReading()).value == 2.0  # the same proxy, the new servant
+
+
+def test_binding_checks_every_signature_and_names_the_mismatch():
+    class Misnamed:
+        async def getReading(self):
+            return Reading()
+
+        async def getWaitReading(self):
+            return Reading()
+
+        async def setGain(self, level):  # the interface says gain
+            return True
+
+    with pytest.raises(ComponentError, match=r"setGain\(level\) does not match .*setGain\(gain\)"):
+        Servant(Sensor, Misnamed())
+
+    class NotAsync(Misnamed):
+        def setGain(self, gain):  # type: ignore[override]
+            return True
+
+    with pytest.raises(ComponentError, match="setGain is not an async method"):
+        Servant(Sensor, NotAsync())
+
+    class ExtraRequired(Misnamed):
+        async def setGain(self, gain, why):  # type: ignore[override]
+            return True
+
+    with pytest.raises(ComponentError, match="setGain"):
+        Servant(Sensor, ExtraRequired())
+
+    class Wrong(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.serves(Sensor, "Sensor")  # checked at declaration, before anything runs
+
+        async def getReading(self, which):
+            return Reading()
+
+    with pytest.raises(ComponentError, match="getReading"):
+        Wrong("W")
+
+
+async def test_another_transport_sits_under_the_same_proxy():
+    """An invoker that carries the call through the wire form, as a bridge would."""
+    clock = VirtualClock()
+    server = SensorServer(clock)
+    servant = Servant(Sensor, server)
+    frames = []
+
+    class WireInvoker:
+        interface, name = Sensor, "remote/Sensor"
+
+        async def invoke(self, method, arguments):
+            request = polling.encode_arguments(Sensor, method, arguments)
+            frames.append(request)
+            try:
+                result = await servant.invoke(method, polling.decode_arguments(
+                    Sensor, method, request))
+            except Exception as exc:
+                raise polling.decode_error(polling.encode_error(exc)) from None
+            return polling.decode_result(Sensor, method,
+                                         polling.encode_result(Sensor, method, result))
+
+    proxy = proxy_for(Sensor, WireInvoker())
+    assert await proxy.setGain(3) is True and server.gain == 3.0
+    assert frames and frames[0].startswith(b"AFW1")
+    server.slot.set(Reading(value=4.5))
+    assert await proxy.getReading() == Reading(value=4.5)
+    with pytest.raises(EOutOfBounds, match="gain must be positive"):  # the same class back
+        await proxy.setGain(-1.0)
+    with pytest.raises(ComponentError, match="ZeroDivisionError"):
+        await proxy.setGain(13.0)
+
+
+def test_errors_travel_as_their_own_afa_class_and_nothing_else_is_instantiated():
+    for error in (EOutOfBounds("x"), ETimeOut("y"), EDevIO("z"), NameNotFound("n")):
+        again = polling.decode_error(polling.encode_error(error))
+        assert type(again) is type(error) and str(again) == str(error)
+    assert type(polling.decode_error(polling.encode_error(KeyError("k")))) is ComponentError
+    forged = polling.encode_error(EDevIO("x")).replace(b'"EDevIO"', b'"SystemExit"')
+    assert type(polling.decode_error(forged)) is ComponentError
+    with pytest.raises(InterfaceError):
+        polling.decode_arguments(Sensor, "setGain", polling.encode_arguments(
+            Sensor, "getReading", {}))
+
+
+async def test_middleware_counts_calls_errors_and_latency_and_hooks_record_calls():
+    clock = VirtualClock(start=0.0)
+    server = SensorServer(clock)
+    registry = NameRegistry(clock)
+    registry.bind("Raptor/Sensor", Servant(Sensor, server))
+    layer = PollLayer(clock)
+    records = []
+    layer.add_hook(records.append)
+    layer.add_hook(lambda record: 1 / 0)  # a broken hook never fails the call
+    proxy = proxy_for(Sensor, LocalInvoker(registry, "Raptor/Sensor", Sensor),
+                      middleware=layer.middleware)
+
+    async def produce():
+        await clock.sleep(0.25)
+        server.slot.set(Reading(value=1.0))
+
+    producer = asyncio.get_running_loop().create_task(produce())
+    await proxy.getWaitReading()
+    await producer
+    await proxy.setGain(2.0)
+    with pytest.raises(EOutOfBounds):
+        await proxy.setGain(-2.0)
+    stats = layer.statistics
+    assert stats[("Raptor/Sensor", "getWaitReading")].as_dict() == {
+        "calls": 1, "errors": 0, "mean_s": pytest.approx(0.25), "max_s": pytest.approx(0.25)}
+    assert stats[("Raptor/Sensor", "setGain")].calls == 2
+    assert stats[("Raptor/Sensor", "setGain")].errors == 1
+    assert [(r.method, r.arguments, r.result) for r in records[:2]] == [
+        ("getWaitReading", {}, Reading(value=1.0)), ("setGain", {"gain": 2.0}, True)]
+    assert isinstance(records[2].error, EOutOfBounds)

@@ -1,5 +1,6 @@
 """The Publish Server and Reactor pattern: decoding, resynchronisation, reconnection."""
 
+from typing import Any
 
 import pytest
 
@@ -73,15 +74,15 @@ def test_decoder_bounds_its_buffer():
     assert decoder.buffered <= 100
 
 
-class Counter(PublishServerReactor[int]):
+class Counter(PublishServerReactor[Any, int]):
     """Publishes every decoded value as a ``Value`` event."""
 
     backoff = Backoff(initial=0.5, factor=2.0, maximum=2.0)
     stale_after = 1.0
 
-    async def setup(self):
-        self.out = self.publisher("Value")
-        await super().setup()
+    def __init__(self, name):
+        super().__init__(name)
+        self.out = self.publishes("Value", Value)
 
     def device(self):
         return SerialSpec("/dev/ttyTEST", 9600)

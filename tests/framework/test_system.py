@@ -1,18 +1,29 @@
 """Components under supervision: lifecycle, start order and delays, restarts, names."""
 
+import asyncio
+from typing import Any
+
 import pytest
 
 from afa import (
     Component,
+    ComponentError,
+    Fault,
     NameNotFound,
+    PublishServerReactor,
+    RealDeviceForbidden,
     RestartPolicy,
+    Scan,
+    SerialSpec,
     StartupError,
     State,
+    StreamDecoder,
     SubscribePublishServer,
     System,
+    TaskFailed,
     VirtualClock,
 )
-from afa.testing import until
+from afa.testing import FakeDevice, memory_pipe, serve, until
 from idl._base import IDLModel, Interface, field
 
 
@@ -30,11 +41,11 @@ class Ticker(SubscribePublishServer):
     def __init__(self, name, event="Tick", fail_at=None):
         super().__init__(name)
         self.event, self.fail_at, self.n = event, fail_at, 0
+        self.out = self.publishes(event, Tick)
+        self.serves(TickSource, name)
 
     async def setup(self):
-        self.out = self.publisher(self.event)
         self.latest = self.slot("tick")
-        self.serve(TickSource, self.name)
 
     async def run(self):
         async for _ in self.clock.periodic(0.1):
@@ -53,9 +64,7 @@ class Recorder(SubscribePublishServer):
     def __init__(self, name, pattern="*"):
         super().__init__(name)
         self.pattern, self.events = pattern, []
-
-    async def setup(self):
-        self.subscribe(self.pattern, self.events.append, maxsize=1000)
+        self.subscribes(pattern, Tick, self.events.append, maxsize=1000)
 
 
 async def test_a_failing_component_is_restarted_while_the_others_keep_publishing(caplog):
@@ -148,8 +157,9 @@ async def test_a_handler_exception_fails_its_component_only():
     clock = VirtualClock(start=0.0)
 
     class Picky(SubscribePublishServer):
-        async def setup(self):
-            self.subscribe("Tick", self.on_tick)
+        def __init__(self, name):
+            super().__init__(name)
+            self.subscribes("Tick", Tick, self.on_tick)
 
         def on_tick(self, event):
             if event.body.n == 3:
@@ -197,3 +207,191 @@ async def test_statistics_count_events_per_type():
         stats = system.statistics()
     assert stats["events"]["A"] == 11
     assert stats["events_dropped"] == 0
+
+
+# -- the wave-2 framework: owned tasks, observers, lifecycle, devices, types --------------
+
+
+class Poll(Interface):
+    async def ping(self) -> Tick: ...
+
+
+class PollOnly(SubscribePublishServer):
+    """Answers polls; has no run body at all."""
+
+    def __init__(self, name):
+        super().__init__(name)
+        self.serves(Poll, "PollOnly")
+
+    async def ping(self):
+        return Tick(n=7)
+
+
+async def test_a_poll_only_component_stays_up_and_keeps_its_name():
+    clock = VirtualClock(start=0.0)
+    async with System([PollOnly("PollOnly")], clock=clock) as system:
+        await clock.advance(30.0)
+        assert system.components["PollOnly"].state is State.RUNNING
+        assert "Raptor/PollOnly" in system.registry.list()
+        assert (await system.proxy(Poll, "PollOnly").ping()).n == 7
+
+
+async def test_an_observer_that_raises_never_fails_or_slows_the_publisher(caplog):
+    clock = VirtualClock(start=0.0)
+    ticker = Ticker("Ticker", "A")
+    async with System([ticker], clock=clock) as system:
+        def broken(event):
+            raise RuntimeError("observer bug")
+
+        observer = system.observe(broken, name="broken", maxsize=4)
+        await clock.advance(2.0)
+        stats = observer.statistics()
+    assert ticker.failures == 0 and ticker.n >= 20
+    assert stats["errors"] >= 20 and stats["delivered"] >= 20
+    assert any("observer broken failed" in r.getMessage() for r in caplog.records)
+
+
+async def test_a_slow_observer_drops_and_counts_instead_of_slowing_anyone():
+    clock = VirtualClock(start=0.0)
+    ticker, recorder = Ticker("Ticker", "A"), Recorder("Recorder", "A")
+    async with System([ticker, recorder], clock=clock) as system:
+        async def slow(event):
+            await clock.sleep(1.0)  # one event per second, ten arrive
+
+        observer = system.observe(slow, name="slow", maxsize=2)
+        await clock.advance(3.0)
+        stats = observer.statistics()
+    assert stats["dropped"] > 20
+    assert len(recorder.events) >= 30  # the fast subscriber saw every tick
+
+
+class CrashingFake(FakeDevice):
+    name = "crasher"
+
+    async def produce(self, stream):
+        await self.clock.sleep(0.5)
+        raise ZeroDivisionError("bug in the fake")
+
+
+class Listener(PublishServerReactor[Any, int]):
+    def device(self):
+        return SerialSpec("/dev/ttyNONE", 9600)
+
+    def decoder(self):
+        class Nothing(StreamDecoder[int]):
+            def scan(self, buffer):
+                return Scan.skip(len(buffer), Fault.GARBAGE)
+
+        return Nothing()
+
+    def handle(self, message):
+        pass
+
+
+async def test_a_fake_device_whose_task_crashes_fails_the_system_with_its_name():
+    clock = VirtualClock(start=0.0)
+    fake = CrashingFake(clock)
+    system = System([Listener("Listener")], clock=clock, devices={"Listener": fake.factory()})
+    with pytest.raises(TaskFailed, match="fake crasher failed: ZeroDivisionError") as info:
+        async with system:
+            await system.run(5.0)
+    assert info.value.owner == "fake crasher"
+    assert clock.monotonic() == pytest.approx(0.5)  # run() ended at the failure
+
+
+async def test_a_misspelled_device_key_is_an_error_listing_the_components():
+    fake = FakeDevice(VirtualClock())
+    with pytest.raises(ComponentError, match=r"'Listenr'.*the components are Listener"):
+        System([Listener("Listener")], devices={"Listenr": fake.factory()})
+
+
+async def test_real_devices_can_be_forbidden():
+    system = System([Listener("Listener")], clock=VirtualClock(), real_devices=False)
+    with pytest.raises(StartupError, match="real devices are forbidden"):
+        async with system:
+            pass
+    # the suite forbids them for every system (afa's pytest plugin)
+    assert System([Listener("Listener")]).real_devices is False
+    from afa.transport import DeviceOpener
+
+    with pytest.raises(RealDeviceForbidden, match="/dev/ttyNONE"):
+        await DeviceOpener(allow_real=False).open("Listener", SerialSpec("/dev/ttyNONE", 9600))
+
+
+async def test_a_body_of_the_wrong_type_is_counted_and_fails_the_subscriber():
+    clock = VirtualClock(start=0.0)
+    recorder = Recorder("Recorder", "A")
+    async with System([recorder], clock=clock, restart_policy=RestartPolicy(initial=1.0)) \
+            as system:
+        system.channel.publish("Raptor", "A", Poll.methods["ping"].result_model(
+            result=Tick(n=1)), origin="Impostor")
+        await until(lambda: recorder.failures == 1, clock, timeout=1.0)
+        assert "carries Poll.ping.result" in repr(recorder.last_error)
+        assert "from Impostor" in str(recorder.last_error)
+        assert recorder._inputs[0].rejected == 1
+        assert recorder.events == []
+
+
+async def test_a_handler_that_lets_cancelled_error_escape_fails_its_component():
+    clock = VirtualClock(start=0.0)
+
+    class Leaky(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.subscribes("A", Tick, self.on_tick)
+            self.seen = 0
+
+        async def on_tick(self, event):
+            self.seen += 1
+            raise asyncio.CancelledError  # e.g. from a helper that was cancelled
+
+    leaky, ticker = Leaky("Leaky"), Ticker("Ticker", "A")
+    async with System([leaky, ticker], clock=clock):
+        await until(lambda: leaky.failures >= 1, clock, timeout=2.0)
+        await until(lambda: leaky.failures >= 2, clock, timeout=5.0)  # restarted, again
+    assert "CancelledError without being cancelled" in str(leaky.last_error)
+
+
+async def test_statistics_after_a_failed_setup_never_raise():
+    clock = VirtualClock(start=0.0)
+
+    class BadSetup(PublishServerReactor[Any, int]):
+        def device(self):
+            return SerialSpec("/dev/null", 9600)
+
+        async def setup(self):
+            raise ValueError("no model file")
+
+    component = BadSetup("Bad")
+    assert isinstance(component.statistics(), dict)  # before any start
+    with pytest.raises(StartupError):
+        async with System([component], clock=clock, devices={"Bad": serve(memory_pipe()[0])}):
+            pass
+    assert isinstance(component.statistics(), dict)
+
+
+async def test_the_device_base_starts_its_reactor_without_help():
+    clock = VirtualClock(start=0.0)
+    host, device = memory_pipe("dev")
+
+    class Quiet(Listener):
+        async def setup(self):  # does not call super(): nothing to forget any more
+            self.set_up = True
+
+    component = Quiet("Quiet")
+    async with System([component], clock=clock, devices={"Quiet": serve(host)}):
+        device.write_nowait(b"xyz")
+        await clock.advance(0.1)
+        assert component.reactor is not None
+        assert component.statistics()["bytes_in"] == 3
+
+
+def test_components_are_typed_by_their_parameter_model():
+    from components.gps_sokkia import GpsSokkia
+    from components.gps_sokkia.parameters import GpsSokkiaParameters
+
+    gps = GpsSokkia("Gps")
+    assert GpsSokkia.parameters_type is GpsSokkiaParameters
+    assert isinstance(gps.parameters, GpsSokkiaParameters)
+    with pytest.raises(ComponentError, match="expected GpsSokkiaParameters"):
+        GpsSokkia("Gps", Tick(n=1))  # type: ignore[arg-type]

@@ -6,6 +6,7 @@ import os
 import pytest
 
 from afa import EDevIO, TransportClosed
+from afa.tasks import TaskGroup
 from afa.transport import DeviceOpener, SerialSpec, TcpSpec, memory_pipe, open_serial, open_tcp
 
 
@@ -118,7 +119,12 @@ async def test_two_components_on_one_serial_port_share_the_connection():
     controller, worker = os.openpty()
     tty.setraw(controller)
     path = os.ttyname(worker)
-    opener = DeviceOpener()
+    opener = DeviceOpener()  # a pseudo-terminal: a real serial port made for the test
+    async with TaskGroup():  # the shared port's tasks belong to someone
+        await _share_one_port(opener, path, controller, worker)
+
+
+async def _share_one_port(opener, path, controller, worker):
     odometry = await opener.open("RaptorOdometryService", SerialSpec(path, 115200))
     control = await opener.open("RaptorService", SerialSpec(path, 115200))
     loop = asyncio.get_running_loop()

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from afa import System, VirtualClock
+from afa import VirtualClock
 from afa.sim.world import parse_world
 from components.simulation import RaptorSimulation
 
@@ -18,22 +18,19 @@ WORLDS = ROOT / "configs" / "worlds"
 
 
 async def simulate(world, duration, seed=0):
-    clock = VirtualClock()
-    system = System.from_xml(RAPTOR, clock=clock)
-    simulation = RaptorSimulation(world, clock, seed=seed)
-    simulation.attach(system)
+    simulation = RaptorSimulation.from_xml(RAPTOR, world, clock=VirtualClock(), seed=seed)
     async with simulation:
-        async with system:
-            await system.run(duration)
-            statistics = system.statistics()
-            health = system.health()
+        await simulation.system.run(duration)
+        statistics = simulation.system.statistics()
+        health = simulation.system.health()
     return simulation, statistics, health
 
 
 async def test_every_emulated_device_is_decoded_by_its_real_driver_at_the_seed_rates():
     simulation, statistics, health = await simulate(WORLDS / "open-field.xml", 10.0)
     events = statistics["events"]
-    elapsed = simulation.sim_time  # start-up (the Launcher's dT) included
+    assert simulation.sim_time == pytest.approx(10.0)  # from the end of start-up
+    elapsed = simulation.clock.monotonic()  # the whole run: start-up (Launcher dT) included
     assert 10.0 < elapsed < 12.0
     assert all(h.healthy for h in health.values()), {n: h.detail for n, h in health.items()}
 
@@ -107,19 +104,20 @@ async def test_exposed_emulators_go_through_real_ptys_and_loopback_tcp():
     """The pyserial-asyncio and TCP transports end to end (wall clock: real I/O)."""
     from afa import WallClock
 
-    clock = WallClock()
-    system = System.from_xml(RAPTOR, clock=clock)
-    simulation = RaptorSimulation(WORLDS / "open-field.xml", clock, expose=True)
-    simulation.attach(system)
+    simulation = RaptorSimulation.from_xml(RAPTOR, WORLDS / "open-field.xml", clock=WallClock(),
+                                           expose=True, real_devices=True)
     async with simulation:
-        async with system:
-            await system.run(3.0)  # a bounded run, not a timing assertion
-            events = system.statistics()["events"]
-            health = system.health()
+        system = simulation.system
+        await system.run(3.0)  # a bounded run, not a timing assertion
+        events = system.statistics()["events"]
+        health = system.health()
     for name in ("Gps", "Imu", "RaptorOdometry", "Laser11", "Laser12"):
         assert events.get(name, 0) > 0, (name, events)
     for name in ("3dmgService", "GpsSokkiaService", "RaptorOdometryService", "RaptorService",
                  "NodLaserService", "NodLaserService12"):
         assert health[name].healthy, (name, health[name].detail)
-    assert simulation._endpoints and all(getattr(e, "closed", True) for e in simulation._endpoints
-                                         if hasattr(e, "path"))
+    assert sorted(simulation.endpoints) == sorted(
+        ["3dmgService", "GpsSokkiaService", "RaptorOdometryService", "RaptorService",
+         "NodLaserService", "NodLaserService12"])
+    assert all(value.startswith(("/dev/pts/", "127.0.0.1:"))
+               for value in simulation.endpoints.values())

@@ -1,0 +1,56 @@
+"""afa's pytest plugin (loaded automatically once afa is installed: entry point
+``pytest11``). For test suites that use afa's components, fakes and clocks:
+
+- every ``async def`` test runs inside an :class:`afa.tasks.TaskGroup` (fixture
+  ``afa_tasks``), so fake devices used without a System have an owner, and a fake whose
+  task fails fails the test at teardown instead of vanishing into a log line;
+- real devices are forbidden (``AFA_FORBID_REAL_DEVICES=1``) unless pytest runs with
+  ``--afa-real-devices`` (hardware-in-the-loop runs): a mistyped device key then raises
+  instead of writing to ``/dev/tty*``;
+- fixture ``virtual_clock``: a :class:`~afa.clock.VirtualClock` starting at 0.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+from collections.abc import AsyncIterator
+from typing import Any
+
+import pytest
+
+from afa.clock import VirtualClock
+from afa.system import FORBID_REAL_DEVICES
+from afa.tasks import TaskGroup
+
+
+def pytest_addoption(parser: Any) -> None:
+    parser.addoption("--afa-real-devices", action="store_true", default=False,
+                     help="allow afa systems to open real serial ports and sockets")
+
+
+def pytest_configure(config: Any) -> None:
+    if not config.getoption("--afa-real-devices", default=False):
+        os.environ[FORBID_REAL_DEVICES] = "1"
+
+
+def pytest_collection_modifyitems(items: list[Any]) -> None:
+    for item in items:
+        function = getattr(item, "function", None)
+        if function is not None and inspect.iscoroutinefunction(function):
+            fixtures = getattr(item, "fixturenames", None)
+            if fixtures is not None and "afa_tasks" not in fixtures:
+                fixtures.insert(0, "afa_tasks")
+
+
+@pytest.fixture
+async def afa_tasks() -> AsyncIterator[TaskGroup]:
+    """A task group for the test; its failures fail the test."""
+    async with TaskGroup("test") as group:
+        yield group
+
+
+@pytest.fixture
+def virtual_clock() -> VirtualClock:
+    """Virtual time from 0: deterministic, instant."""
+    return VirtualClock(start=0.0)
