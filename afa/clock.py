@@ -1,7 +1,7 @@
 """Clocks: where components get time from.
 
 Components never read ``time.*`` or use ``asyncio.sleep`` for timing; they ask the clock
-the runtime injects. A clock keeps two kinds of time apart (decision 0006):
+the runtime injects. A clock keeps two kinds of time apart (decision 0008):
 
 - **stamps**, :meth:`Clock.now`: seconds since the Unix epoch (UTC), for the time
   fields of events. On a vehicle the wall clock can step (GPS or NTP corrects it);
@@ -34,13 +34,13 @@ import time
 import weakref
 from abc import ABC, abstractmethod
 from collections.abc import AsyncIterator, Callable, Iterator, Sized
-from contextlib import asynccontextmanager, contextmanager
+from contextlib import contextmanager
 
 from afa.errors import ETimeOut
 from afa.tasks import loop_service
 
 __all__ = ["Clock", "WallClock", "VirtualClock", "ScaledClock", "TimerHandle", "Watchdog",
-           "DEFAULT_EPOCH"]
+           "Deadline", "DEFAULT_EPOCH"]
 
 #: 2005-09-17 12:00:00 UTC, the date in the Raptor's geometry file name (050917...).
 DEFAULT_EPOCH = 1126958400.0
@@ -126,20 +126,17 @@ class Clock(ABC):
             yield tick
             tick = max(tick + 1, int((self.monotonic() - start) / period) + 1)
 
-    @asynccontextmanager
-    async def timeout(self, seconds: float | None, what: str = "operation") -> AsyncIterator[None]:
-        """Cancel the body after ``seconds`` of this clock's time and raise
-        :class:`~afa.errors.ETimeOut` (also a ``TimeoutError``). ``None``: no deadline."""
-        if seconds is None:
-            yield
-            return
-        async with self._deadline(seconds, f"{what} timed out after {seconds:g} s"):
-            yield
+    def timeout(self, seconds: float | None, what: str = "operation") -> Deadline:
+        """``async with clock.timeout(s):`` cancels the body after ``seconds`` of this
+        clock's time and raises :class:`~afa.errors.ETimeOut` (also a ``TimeoutError``).
+        ``None``: no deadline."""
+        return Deadline(self, seconds, what, f"{what} timed out after {seconds:g} s"
+                        if seconds is not None else "")
 
-    @asynccontextmanager
-    async def watchdog(self, seconds: float, what: str = "operation") -> AsyncIterator[Watchdog]:
-        """Cancel the body once :meth:`Watchdog.feed` has not been called for ``seconds``
-        of this clock's time, and raise :class:`~afa.errors.ETimeOut`.
+    def watchdog(self, seconds: float, what: str = "operation") -> Deadline:
+        """``async with clock.watchdog(s) as dog:`` cancels the body once
+        :meth:`Watchdog.feed` has not been called for ``seconds`` of this clock's time,
+        and raises :class:`~afa.errors.ETimeOut`.
 
         Unlike a :meth:`timeout` around each wait, feeding costs one store: the single
         timer is moved only when it fires early (input that went stale, such as a device
@@ -147,25 +144,39 @@ class Clock(ABC):
         """
         if not seconds > 0:
             raise ValueError(f"seconds must be positive, got {seconds}")
-        async with self._deadline(seconds, f"{what}: nothing for {seconds:g} s") as dog:
-            yield dog
+        return Deadline(self, seconds, what, f"{what}: nothing for {seconds:g} s")
 
-    @asynccontextmanager
-    async def _deadline(self, seconds: float, message: str) -> AsyncIterator[Watchdog]:
-        """The body runs under a :class:`Watchdog`; when it fires, the cancellation it
-        causes becomes ``ETimeOut(message)`` (a cancellation from outside stays one). A
-        :meth:`timeout` is a watchdog nobody feeds."""
+
+class Deadline:
+    """The context manager of :meth:`Clock.timeout` and :meth:`Clock.watchdog`: the body
+    runs under a :class:`Watchdog`; when it fires, the cancellation it causes becomes
+    ``ETimeOut`` (a cancellation from outside stays one). A timeout is a watchdog nobody
+    feeds. (A class rather than a generator: polls enter one per call.)"""
+
+    __slots__ = ("_clock", "_seconds", "_message", "_dog")
+
+    def __init__(self, clock: Clock, seconds: float | None, what: str, message: str) -> None:
+        self._clock = clock
+        self._seconds = seconds
+        self._message = message
+        self._dog: Watchdog | None = None
+
+    async def __aenter__(self) -> Watchdog | None:
+        if self._seconds is None:
+            return None
         task = asyncio.current_task()
         assert task is not None, "timeouts and watchdogs need a running task"
-        dog = Watchdog(self, seconds, task)
-        try:
-            yield dog
-        except asyncio.CancelledError:
-            if dog.fired and task.uncancel() == 0:
-                raise ETimeOut(message) from None
-            raise
-        finally:
-            dog.stop()
+        self._dog = Watchdog(self._clock, self._seconds, task)
+        return self._dog
+
+    async def __aexit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                        traceback: object) -> None:
+        dog = self._dog
+        if dog is None:
+            return
+        dog.stop()
+        if kind is asyncio.CancelledError and dog.fired and dog._task.uncancel() == 0:
+            raise ETimeOut(self._message) from None
 
 
 class Watchdog:
@@ -252,6 +263,7 @@ class VirtualClock(Clock):
         self._pace = pace
         self._io_pending = 0
         self._anchor: tuple[float, float, float] | None = None  # (virtual, real, pace)
+        self._served = False  # a live driver has this clock in its list
         self.auto_advance = auto_advance
 
     # -- time ---------------------------------------------------------------------------
@@ -309,7 +321,8 @@ class VirtualClock(Clock):
         earliest = self._timers[0][0] if self._timers else None
         heapq.heappush(self._timers, (handle.deadline, next(self._order), handle))
         if self.auto_advance:
-            self._ensure_driver()
+            if not self._served:
+                self._ensure_driver()
             if earliest is None or handle.deadline < earliest:
                 self._poke()
         return handle
@@ -453,6 +466,7 @@ class _LoopDriver:
     def serve(self, clock: VirtualClock) -> None:
         if clock not in self.clocks:
             self.clocks.append(clock)
+        clock._served = True
         if self.task is None or self.task.done():
             # the clock's own task, outside any System: it must outlive them all
             self.task = loop_service(self._run(), "afa-virtual-clock")
@@ -466,8 +480,14 @@ class _LoopDriver:
         ready = _ready_queue()
         loop = asyncio.get_running_loop()
         while True:
-            self.clocks = [c for c in self.clocks if c._has_work()]
-            if not self.clocks:
+            working = []
+            for clock in self.clocks:
+                if clock._has_work():
+                    working.append(clock)
+                else:
+                    clock._served = False
+            self.clocks = working
+            if not working:
                 return
             await asyncio.sleep(0)
             if ready:

@@ -283,7 +283,8 @@ class PollLayer:
         finally:
             duration = clock.monotonic() - start
             stats.total += duration
-            stats.maximum = max(stats.maximum, duration)
+            if duration > stats.maximum:
+                stats.maximum = duration
             if self._hooks:
                 record = PollRecord(stamp, call.name, call.interface, call.method,
                                     call.arguments, result, error, duration)
@@ -328,15 +329,21 @@ def _make_method(spec: MethodSpec, interface: type[Interface]) -> Callable[..., 
     check_return = returns not in (None, type(None))
     label = f"{interface.__name__}.{spec.name}"
 
+    count = len(parameters)
+
     async def call(self: Proxy, *args: Any, **kwargs: Any) -> Any:
-        try:
-            bound = spec.signature.bind(None, *args, **kwargs)
-        except TypeError as exc:
-            raise InterfaceError(f"{label}: {exc}") from None
-        bound.apply_defaults()
+        if not kwargs and len(args) == count:  # the common case, without inspect
+            given = dict(zip(parameters, args, strict=True))
+        else:
+            try:
+                bound = spec.signature.bind(None, *args, **kwargs)
+            except TypeError as exc:
+                raise InterfaceError(f"{label}: {exc}") from None
+            bound.apply_defaults()
+            given = bound.arguments
         arguments = {}
         for name in parameters:
-            value = bound.arguments[name]
+            value = given[name]
             if name in hints:
                 try:
                     value = _adapter(hints[name]).validate_python(value)

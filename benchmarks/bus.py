@@ -11,6 +11,13 @@ wall-clock nanoseconds per event (per delivered copy is ``/ subscribers``).
 - ``pyee``: ``AsyncIOEventEmitter.emit`` with coroutine handlers (pyee schedules each)
 - ``blinker``: ``Signal.send`` with plain receivers (synchronous, not decoupled: it is
   a lower bound for blinker, which has no queueing of its own)
+- ``afa component ports``: ``Output.publish`` -> a component's typed ``Input`` handler
+  (type check, origin, the component's task), the path components really use
+
+Trials are interleaved: every repeat runs every contender once, in a rotated order, so
+drift of a shared, noisy machine lands on all of them alike; the figure is the median.
+A second table times one poll: a direct ``await`` of the server's method, the proxy on a
+bare invoker, and the proxy through the system's middleware (timeout, statistics).
 
 Usage: ``python benchmarks/bus.py [--events N] [--repeat R] [--json]``
 """
@@ -29,8 +36,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from afa import EventChannel, VirtualClock  # noqa: E402
-from idl._base import IDLModel, field  # noqa: E402
+from afa import (  # noqa: E402
+    EventChannel,
+    LocalInvoker,
+    SubscribePublishServer,
+    System,
+    VirtualClock,
+    proxy_for,
+)
+from idl._base import IDLModel, Interface, field  # noqa: E402
 
 BURST = 100
 
@@ -102,6 +116,37 @@ async def bench_afa(n: int, subscribers: int) -> float:
     return elapsed
 
 
+async def bench_ports(n: int, subscribers: int) -> float:
+    """Output.publish -> typed Input handlers of components, in virtual time."""
+
+    class Source(SubscribePublishServer):
+        def __init__(self, name: str) -> None:
+            super().__init__(name)
+            self.out = self.publishes("Sample", Sample)
+
+    class Sink(SubscribePublishServer):
+        def __init__(self, name: str) -> None:
+            super().__init__(name)
+            self.count = 0
+            self.subscribes("Sample", Sample, self.on_sample, maxsize=4 * BURST)
+
+        def on_sample(self, event: object) -> None:
+            self.count += 1
+
+    source = Source("Source")
+    sinks = [Sink(f"Sink{k}") for k in range(subscribers)]
+    async with System([source, *sinks], clock=VirtualClock()):
+        start = time.perf_counter()
+        for i in range(0, n, BURST):
+            for _ in range(min(BURST, n - i)):
+                source.out.publish(BODY)
+            await asyncio.sleep(0)
+        while any(sink.count < n for sink in sinks):
+            await asyncio.sleep(0)
+        elapsed = time.perf_counter() - start
+    return elapsed
+
+
 async def bench_pyee(n: int, subscribers: int) -> float:
     from pyee.asyncio import AsyncIOEventEmitter
 
@@ -159,21 +204,54 @@ CONTENDERS: dict[str, Callable[[int, int], Awaitable[float]]] = {
     "afa EventChannel": bench_afa,
     "pyee AsyncIOEventEmitter": bench_pyee,
     "blinker Signal (sync)": bench_blinker,
+    "afa component ports": bench_ports,
 }
 
 
 def measure(events: int, repeat: int) -> dict[str, dict[str, float]]:
-    results: dict[str, dict[str, float]] = {}
-    for name, bench in CONTENDERS.items():
-        results[name] = {}
-        for subscribers in (1, 10):
-            samples = []
-            for _ in range(repeat):
+    samples: dict[str, dict[int, list[float]]] = {
+        name: {1: [], 10: []} for name in CONTENDERS}
+    names = list(CONTENDERS)
+    for trial in range(repeat):
+        order = names[trial % len(names):] + names[:trial % len(names)]  # rotate each trial
+        for name in order:
+            for subscribers in (1, 10):
                 gc.collect()
-                elapsed = asyncio.run(bench(events, subscribers))
-                samples.append(elapsed / events * 1e9)
-            results[name][f"{subscribers}_sub_ns_per_event"] = round(statistics.median(samples), 1)
-    return results
+                elapsed = asyncio.run(CONTENDERS[name](events, subscribers))
+                samples[name][subscribers].append(elapsed / events * 1e9)
+    return {name: {f"{k}_sub_ns_per_event": round(statistics.median(v), 1)
+                   for k, v in by_subs.items()} for name, by_subs in samples.items()}
+
+
+class Echo(Interface):
+    async def echo(self, value: Sample) -> Sample: ...
+
+
+class EchoServer(SubscribePublishServer):
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.serves(Echo, "Echo")
+
+    async def echo(self, value: Sample) -> Sample:
+        return value
+
+
+async def bench_polls(calls: int) -> dict[str, float]:
+    """Microseconds per call: direct, bare proxy, proxy through the system middleware."""
+    server = EchoServer("Echo")
+    async with System([server], clock=VirtualClock()) as system:
+        bare = proxy_for(Echo, LocalInvoker(system.registry, "Raptor/Echo", Echo))
+        full = system.proxy(Echo, "Echo")
+        contenders = {"direct await": server.echo, "proxy, bare invoker": bare.echo,
+                      "proxy + middleware": full.echo}
+        out: dict[str, list[float]] = {name: [] for name in contenders}
+        for _ in range(5):
+            for name, call in contenders.items():
+                start = time.perf_counter()
+                for _ in range(calls):
+                    await call(BODY)
+                out[name].append((time.perf_counter() - start) / calls * 1e6)
+    return {name: round(statistics.median(v), 2) for name, v in out.items()}
 
 
 def main() -> None:
@@ -183,12 +261,13 @@ def main() -> None:
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     results = measure(args.events, args.repeat)
+    polls = asyncio.run(bench_polls(max(1000, args.events // 20)))
     floor = results["asyncio.Queue (floor)"]
     afa = results["afa EventChannel"]
     ratios = {k: round(afa[k] / floor[k], 2) for k in floor}
     if args.json:
         print(json.dumps({"events": args.events, "repeat": args.repeat, "results": results,
-                          "afa_over_queue": ratios}, indent=2))
+                          "afa_over_queue": ratios, "poll_us": polls}, indent=2))
         return
     print(f"per-event cost, median of {args.repeat} runs of {args.events} events "
           f"(bursts of {BURST}); ns per published event")
@@ -197,6 +276,9 @@ def main() -> None:
         print(f"{name:28s} {row['1_sub_ns_per_event']:14.0f} {row['10_sub_ns_per_event']:16.0f}")
     print(f"afa / asyncio.Queue: {ratios['1_sub_ns_per_event']}x (1 sub), "
           f"{ratios['10_sub_ns_per_event']}x (10 subs)")
+    print("\none poll (us per call, median of 5 interleaved runs)")
+    for name, value in polls.items():
+        print(f"  {name:24s} {value:8.2f}")
 
 
 if __name__ == "__main__":

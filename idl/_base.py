@@ -29,6 +29,7 @@ import base64
 import functools
 import hashlib
 import inspect
+import re
 import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -130,6 +131,9 @@ class IDLModel(BaseModel):
 
 #: Serialisation context of :meth:`IDLModel.fingerprint` (compared by identity).
 _FINGERPRINT: dict[str, bool] = {"fingerprint": True}
+#: The dtype strings arrays are described with: byte order, kind (bool, int, unsigned,
+#: float), item size. Nothing else (objects, strings, deprecated aliases) is accepted.
+_DTYPE_TEXT = re.compile(r"[<>|=][biuf][1248]")
 #: Context key under which :mod:`idl.wire` collects (encoding) or supplies (decoding) the
 #: raw array buffers that travel beside the JSON header.
 WIRE_BUFFERS = "afa.wire.buffers"
@@ -205,10 +209,15 @@ class Array:
     def _from_mapping(self, value: Mapping[str, Any], context: Any) -> Any:
         """An array from its JSON (base64) or wire (buffer index) description."""
         try:
-            dtype = np.dtype(value["dtype"])
+            text = value["dtype"]
+            if not (isinstance(text, str) and _DTYPE_TEXT.fullmatch(text)):
+                raise ValueError(f"dtype {text!r} is not a plain numeric dtype string")
+            dtype = np.dtype(text)
+            if dtype.newbyteorder("=") != np.dtype(self.dtype).newbyteorder("="):
+                raise ValueError(f"dtype {text} where {self.dtype} is declared")
             shape = tuple(int(n) for n in value["shape"])
-            if dtype.hasobject or any(n < 0 for n in shape):
-                raise ValueError("object dtypes and negative dimensions are refused")
+            if any(n < 0 for n in shape):
+                raise ValueError("negative dimensions are refused")
             if "$array" in value:
                 buffers = context.get(WIRE_BUFFERS) if isinstance(context, Mapping) else None
                 if buffers is None:
