@@ -51,11 +51,17 @@ def _parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run the components a configuration file enables")
     run.add_argument("config", type=Path, help="Miro XML configuration (configs/raptor.xml)")
     run.add_argument("--sim", action="store_true", help="run against the simulated world")
-    run.add_argument("--world", type=Path, help="world file for --sim")
+    run.add_argument("--world", help="world for --sim: a file, or the name of a shipped world "
+                                      f"({', '.join(_shipped_worlds()) or 'none found'})")
     run.add_argument("--duration", type=float, help="stop after this many seconds (clock time)")
     run.add_argument("--seed", type=int, default=0, help="random seed for the simulation")
     run.add_argument("--fast", action="store_true",
                      help="virtual time, as fast as possible (needs --sim)")
+    run.add_argument("--realtime-factor", type=float, metavar="N",
+                     help="virtual time paced at N times real time (needs --sim)")
+    run.add_argument("--teleop", action="store_true",
+                     help="with --sim: drive the world's <drive> script through Vehicle "
+                          "Control instead of the autonomous mission")
     run.add_argument("--summary", type=Path, help="write a JSON run summary here")
     run.add_argument("--expose", action="store_true",
                      help="with --sim: serve serial emulators on pseudo-terminals and the "
@@ -220,10 +226,41 @@ def _jsonable(value: Any) -> Any:
 
 
 # -- run --------------------------------------------------------------------------------
+def _shipped_worlds() -> list[str]:
+    folder = Path(__file__).resolve().parent.parent / "configs" / "worlds"
+    return sorted(p.stem for p in folder.glob("*.xml"))
+
+
+def _world_path(text: str) -> Path:
+    """A world file, or the name of a shipped world (``rock-field``)."""
+    path = Path(text)
+    if path.exists() or path.suffix:
+        return path
+    shipped = Path(__file__).resolve().parent.parent / "configs" / "worlds" / f"{text}.xml"
+    if shipped.exists():
+        return shipped
+    from afa.registry import suggest
+
+    raise ConfigError(f"no world file or shipped world {text!r}"
+                      f"{suggest(text, _shipped_worlds())}; shipped worlds: "
+                      f"{', '.join(_shipped_worlds())}")
+
+
 def _run(args: argparse.Namespace) -> int:
-    if (args.fast or args.world is not None or args.expose) and not args.sim:
-        print("afa run: --fast, --world and --expose need --sim (real devices run in real "
-              "time).", file=sys.stderr)
+    needs_sim = {"--fast": args.fast, "--world": args.world is not None,
+                 "--expose": args.expose, "--teleop": args.teleop,
+                 "--realtime-factor": args.realtime_factor is not None}
+    if not args.sim and any(needs_sim.values()):
+        used = ", ".join(name for name, given in needs_sim.items() if given)
+        print(f"afa run: {used} need(s) --sim (real devices run in real time).",
+              file=sys.stderr)
+        return EXIT_INVALID
+    if args.fast and args.realtime_factor is not None:
+        print("afa run: --fast (as fast as possible) and --realtime-factor exclude each "
+              "other.", file=sys.stderr)
+        return EXIT_INVALID
+    if args.realtime_factor is not None and not args.realtime_factor > 0:
+        print("afa run: --realtime-factor must be positive.", file=sys.stderr)
         return EXIT_INVALID
     if args.expose and args.fast:
         print("afa run: --expose uses real pseudo-terminals and sockets, whose timing virtual "
@@ -244,17 +281,24 @@ def _simulator() -> Any:
 
 
 async def _run_system(args: argparse.Namespace) -> int:
-    from afa.clock import VirtualClock, WallClock
+    from afa.clock import Clock, VirtualClock, WallClock
     from afa.errors import StartupError, TaskFailed
     from afa.system import System
 
-    clock = VirtualClock() if args.fast else WallClock()
+    clock: Clock
+    if args.fast:
+        clock = VirtualClock()
+    elif args.realtime_factor is not None:
+        clock = VirtualClock(pace=args.realtime_factor)
+    else:
+        clock = WallClock()
     simulation = None
     options: dict[str, Any] = {"strict": args.strict, "clock": clock}
     if args.sim:
         simulation_cls = _simulator()
-        world = args.world or simulation_cls.default_world()
-        simulation = simulation_cls(world, clock, seed=args.seed, expose=args.expose)
+        world = _world_path(args.world) if args.world else simulation_cls.default_world()
+        simulation = simulation_cls(world, clock, seed=args.seed, expose=args.expose,
+                                    teleop=args.teleop)
         options["devices"] = simulation.device_for
     system = System.from_xml(args.config, **options)
     if simulation is not None:
@@ -279,6 +323,8 @@ async def _run_system(args: argparse.Namespace) -> int:
             summary = _summary(system, clock_start, wall_start)
             if simulation is not None:
                 summary.update(simulation.summary())
+                if not simulation.teleop:
+                    summary.update(simulation.course_reference())
     except StartupError as exc:
         await _close(simulation)
         print(f"afa run: the system did not start. {exc}".replace("\n", " "), file=sys.stderr)

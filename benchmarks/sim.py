@@ -36,7 +36,7 @@ TARGET = 20.0
 
 async def whole_stack(world: Path, duration: float) -> dict[str, float]:
     simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml", world,
-                                           clock=VirtualClock(), seed=0)
+                                           clock=VirtualClock(), seed=0, teleop=True)
     start = time.perf_counter()
     async with simulation:
         await simulation.system.run(duration)

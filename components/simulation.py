@@ -8,9 +8,17 @@ Each device package registers its emulator beside its codec and fake (entry poin
 component type and offers them to the System at construction
 (``System(devices=sim.device_for)``), through the :class:`SimulatedWorld` API.
 
-The simulation also runs the world's ``drive`` script through the Vehicle Control
-interface and keeps the run summary (distance, collisions, waypoints, pose error
-against ground truth, a digest of every event).
+In a world with a mission the simulation plays the control station, as an operator
+would: it sends the waypoints (latitude/longitude) to Pure Pursuit and the Global Map
+through their interfaces, sets patrol mode, starts the vehicle and switches the arbiter
+on; the autonomous stack drives. With ``teleop`` (``afa run --teleop``), or in a world
+without a mission, it runs the world's ``drive`` script through Vehicle Control's
+joystick interface instead.
+
+It keeps the run summary: distance, collisions, least clearance, waypoints reached in
+order by the vehicle's actual track, mission time and distance, halts by Obstacle
+Detection, oscillation of the commanded steering, pose error against ground truth, and a
+digest of every event.
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ import numpy as np
 from afa import ByteStream, Clock, EDevIO, Event, SerialSpec, System, TcpSpec, registry
 from afa.component import Component
 from afa.ports import Direction, interface_name
+from afa.sim.oracle import HazardField, shortest_course
 from afa.sim.terrain import Terrain
 from afa.sim.vehicle import Vehicle, VehicleState
 from afa.sim.world import World, load_world
@@ -36,8 +45,17 @@ from afa.tasks import spawn
 from afa.transport import AsyncioByteStream, DeviceFactory, PtyDeviceStream, open_tcp
 from components.gps_sokkia.codec import latlon_to_utm
 from components.model_server.geometry import GeometryModel
-from idl import PoseTransformIDL, VelocityIDL
+from idl import (
+    ArcVoteIDL,
+    PoseTransformIDL,
+    VelocityDataIDL,
+    VelocityIDL,
+    WaypointGroupIDL,
+    WaypointIDL,
+)
+from idl import GlobalMap as GlobalMapInterface
 from idl import VehicleControl as VehicleControlInterface
+from idl import VehiclePlan as VehiclePlanInterface
 
 __all__ = ["RaptorSimulation", "SimulatedWorld", "DEFAULT_WORLD", "WAYPOINT_TOLERANCE"]
 
@@ -54,6 +72,9 @@ PHYSICS_STEP = 0.02
 #: How often the drive script repeats its joystick command (s): Vehicle Control's
 #: watchdog stops the vehicle when commands stop arriving, as a real joystick link would.
 JOYSTICK_PERIOD = 0.1
+#: Steering commands within this angle of straight ahead (rad, 1 degree) count as
+#: straight when oscillation (sign changes of the commanded steering) is counted.
+STEERING_DEADBAND = math.radians(1.0)
 
 F = TypeVar("F")
 
@@ -133,13 +154,13 @@ class RaptorSimulation:
 
     @classmethod
     def from_xml(cls, config: str | Path, world: World | str | Path | None = None, *,
-                 clock: Clock, seed: int = 0, expose: bool = False,
+                 clock: Clock, seed: int = 0, expose: bool = False, teleop: bool = False,
                  **system_options: Any) -> RaptorSimulation:
         """A simulation of ``world`` (default: the open field) with the System that
         ``config`` describes attached (``sim.system``); ``system_options`` go to
         :meth:`System.from_xml`. Raises ConfigError for a bad file."""
         simulation = cls(DEFAULT_WORLD if world is None else world, clock, seed=seed,
-                         expose=expose)
+                         expose=expose, teleop=teleop)
         system = System.from_xml(config, clock=clock, devices=simulation.device_for,
                                  **system_options)
         simulation.attach(system)
@@ -171,10 +192,12 @@ class RaptorSimulation:
                 await self.aclose()
 
     def __init__(self, world: World | str | Path, clock: Clock, *, seed: int = 0,
-                 geometry: GeometryModel | None = None, expose: bool = False) -> None:
+                 geometry: GeometryModel | None = None, expose: bool = False,
+                 teleop: bool = False) -> None:
         """``expose``: serve the serial emulators on pseudo-terminals (the drivers open
         them through pyserial-asyncio) and the lasers on loopback TCP ports, instead of
-        in-memory pipes. Real I/O is not deterministic: use it with the wall clock."""
+        in-memory pipes. Real I/O is not deterministic: use it with the wall clock.
+        ``teleop``: drive the world's script instead of the mission."""
         self.world = world if isinstance(world, World) else load_world(world)
         self.clock = clock
         self.seed = seed
@@ -182,6 +205,15 @@ class RaptorSimulation:
         self.vehicle = Vehicle.from_world(self.world, self.terrain)
         self.geometry = geometry or GeometryModel.load(CONFIGS / "050917raptor01.XML")
         self.expose = expose
+        self.teleop = teleop or not self.world.mission.waypoints
+        self.mission_complete_time: float | None = None
+        self.mission_distance: float | None = None
+        self.clearance = math.inf
+        self.halts = 0
+        self._halted = False
+        self._steering_sign = 0
+        self.steering_sign_changes = 0
+        self._hazards: HazardField | None = None
         self._seeds = np.random.SeedSequence(seed)
         self._start = 0.0
         self._command = (0.0, 0.0, True)  # translation m/s, steering rad, brake
@@ -287,8 +319,11 @@ class RaptorSimulation:
         if system is None:
             raise RuntimeError("attach the simulation to a System before running it")
         self._start = self.clock.monotonic()
+        self._hazards = HazardField(self.terrain, self.vehicle.parameters)
         tasks = [system.tasks.spawn(self._physics(), owner="simulation physics")]
-        if self.world.drive:
+        if not self.teleop:
+            tasks.append(system.tasks.spawn(self._mission(), owner="simulation mission"))
+        elif self.world.drive:
             tasks.append(system.tasks.spawn(self._drive_script(), owner="simulation drive"))
         try:
             yield self
@@ -332,6 +367,7 @@ class RaptorSimulation:
                 self.collisions.append(record)
                 log.warning("collision: %s", record)
             self._track_waypoints()
+            self._track_clearance()
 
     def _track_waypoints(self) -> None:
         waypoints = self.world.mission.waypoints
@@ -342,8 +378,54 @@ class RaptorSimulation:
         if distance <= WAYPOINT_TOLERANCE:
             self.waypoints_reached += 1
             self._next_waypoint += 1
+            if self.waypoints_reached == len(waypoints):  # the course (one lap) is done
+                self.mission_complete_time = self.sim_time
+                self.mission_distance = self.state.distance
             if self.world.mission.patrol:
                 self._next_waypoint %= len(waypoints)
+
+    def _track_clearance(self) -> None:
+        """The least distance from the body's outline to a hazard so far."""
+        if self._hazards is None:
+            return
+        state = self.state
+        outline = self.vehicle.footprint(0.35)
+        c, sn = math.cos(state.yaw), math.sin(state.yaw)
+        east = state.east + outline[:, 0] * c - outline[:, 1] * sn
+        north = state.north + outline[:, 0] * sn + outline[:, 1] * c
+        self.clearance = min(self.clearance, self._hazards.clearance(east, north))
+
+    async def _mission(self) -> None:
+        """The control station: waypoints to Pure Pursuit and the Global Map, patrol
+        mode, start the vehicle, arbiter on (then the stack drives)."""
+        system = self.system
+        plan_name = served_name(system, VehiclePlanInterface)
+        control_name = served_name(system, VehicleControlInterface)
+        if plan_name is None or control_name is None:
+            log.warning("the world has a mission but no %s is configured: nothing drives",
+                        "Pure Pursuit" if plan_name is None else "Vehicle Control")
+            return
+        mission = self.world.mission
+        group = WaypointGroupIDL(waypoints=tuple(
+            WaypointIDL(latitude=w.latitude, longitude=w.longitude) for w in mission.waypoints),
+            patrolMode=mission.patrol)
+        plan = await system.resolve(VehiclePlanInterface, plan_name)
+        await plan.setWaypointList(group)
+        await plan.setPatrolMode(mission.patrol)
+        global_name = served_name(system, GlobalMapInterface)
+        if global_name is not None:
+            await (await system.resolve(GlobalMapInterface, global_name)).setWaypointList(group)
+        control = await system.resolve(VehicleControlInterface, control_name)
+        while True:  # the controller link comes up a moment after the component
+            try:
+                await control.startVehicle()
+                await control.setArbiter(True)
+                break
+            except EDevIO as exc:
+                log.info("mission waiting for the vehicle: %s", exc)
+                await self.clock.sleep(0.5)
+        log.info("mission started: %d waypoints%s", len(mission.waypoints),
+                 " (patrol)" if mission.patrol else "")
 
     async def _drive_script(self) -> None:
         """Tele-operation: the world's timed commands, sent as a joystick would."""
@@ -379,9 +461,28 @@ class RaptorSimulation:
     def _observe(self, event: Event) -> None:
         digest = self._digest
         digest.update(f"{event.type}|{event.time:.6f}|".encode())
-        digest.update(event.body.fingerprint())  # arrays by their SHA-256
-        if isinstance(event.body, PoseTransformIDL) and event.type == "Pose":
-            self._pose_error(event.body)
+        body = event.body
+        digest.update(body.fingerprint())  # arrays by their SHA-256
+        if isinstance(body, PoseTransformIDL) and event.type == "Pose":
+            self._pose_error(body)
+        elif isinstance(body, ArcVoteIDL) and body.behaviour == "ObstacleDetection":
+            halted = body.all_vetoed
+            if halted and not self._halted:
+                self.halts += 1
+            self._halted = halted
+        elif isinstance(body, VelocityDataIDL):
+            self._steering(body.target.steeringAngle)
+
+    def _steering(self, angle: float) -> None:
+        """Count sign changes of the commanded steering (outside the dead band) while
+        the mission runs."""
+        if self.mission_complete_time is not None:
+            return
+        sign = 0 if abs(angle) < STEERING_DEADBAND else (1 if angle > 0 else -1)
+        if sign and self._steering_sign and sign != self._steering_sign:
+            self.steering_sign_changes += 1
+        if sign:
+            self._steering_sign = sign
 
     def _pose_error(self, pose: PoseTransformIDL) -> None:
         state = self.state
@@ -410,19 +511,40 @@ class RaptorSimulation:
                 "max_position_m": round(float(np.max(settled[:, 0])), 4),
                 "rms_heading_deg": round(float(np.sqrt(np.mean(settled[:, 1] ** 2))), 4),
             }
+        mission_minutes = (self.mission_complete_time or self.sim_time) / 60.0
         return {
             "world": self.world.name,
             "seed": self.seed,
+            "mode": "teleop" if self.teleop else "autonomous",
             "distance_m": round(self.state.distance, 3),
             "collisions": list(self.collisions),
+            "clearance_m": None if math.isinf(self.clearance) else round(self.clearance, 3),
             "waypoints_reached": self.waypoints_reached,
             "waypoints_total": len(self.world.mission.waypoints),
+            "mission_complete_time_s": None if self.mission_complete_time is None
+            else round(self.mission_complete_time, 3),
+            "mission_distance_m": None if self.mission_distance is None
+            else round(self.mission_distance, 3),
+            "halts": self.halts,
+            "oscillation_per_min": round(self.steering_sign_changes / mission_minutes, 3)
+            if mission_minutes > 0 else None,
             "pose_error": pose_error,
             "event_digest": self._digest.hexdigest(),
             "vehicle": {"east": round(self.state.east, 3), "north": round(self.state.north, 3),
                         "heading_deg": round(self.state.heading_deg, 2),
                         "speed": round(self.state.speed, 3)},
         }
+
+    def course_reference(self) -> dict[str, Any]:
+        """The shortest collision-free course on the fully known world
+        (:func:`afa.sim.oracle.shortest_course`) and this run's ratio to it."""
+        field = self._hazards or HazardField(self.terrain, self.vehicle.parameters)
+        course = shortest_course(self.world, field)
+        ratio = None
+        if course.length and self.mission_distance is not None:
+            ratio = round(self.mission_distance / course.length, 3)
+        return {"oracle_distance_m": None if course.length is None
+                else round(course.length, 3), "path_ratio": ratio}
 
     def progress(self) -> str:
         s = self.state

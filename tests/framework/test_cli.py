@@ -76,6 +76,16 @@ def test_run_with_a_bad_config_exits_2_without_traceback(tmp_path, capsys):
     assert err.startswith(f"{bad}:") and "Traceback" not in err
 
 
-def test_fast_without_sim_is_refused(capsys):
+def test_simulation_options_without_sim_are_refused(capsys):
     assert main(["run", str(RAPTOR), "--fast"]) == 2
-    assert "need --sim" in capsys.readouterr().err
+    assert "--fast need(s) --sim" in capsys.readouterr().err
+    assert main(["run", str(RAPTOR), "--teleop", "--realtime-factor", "2"]) == 2
+    assert "--teleop, --realtime-factor need(s) --sim" in capsys.readouterr().err
+    assert main(["run", str(RAPTOR), "--sim", "--fast", "--realtime-factor", "2"]) == 2
+    assert "exclude each other" in capsys.readouterr().err
+
+
+def test_an_unknown_world_name_is_explained(capsys):
+    assert main(["run", str(RAPTOR), "--sim", "--fast", "--world", "rock-feild"]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'rock-field'" in err and "shipped worlds:" in err

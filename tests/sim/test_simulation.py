@@ -18,7 +18,9 @@ WORLDS = ROOT / "configs" / "worlds"
 
 
 async def simulate(world, duration, seed=0):
-    simulation = RaptorSimulation.from_xml(RAPTOR, world, clock=VirtualClock(), seed=seed)
+    # the world's scripted drive: these tests are about the sensing stack
+    simulation = RaptorSimulation.from_xml(RAPTOR, world, clock=VirtualClock(), seed=seed,
+                                           teleop=True)
     async with simulation:
         await simulation.system.run(duration)
         statistics = simulation.system.statistics()
@@ -121,3 +123,16 @@ async def test_exposed_emulators_go_through_real_ptys_and_loopback_tcp():
          "NodLaserService", "NodLaserService12"])
     assert all(value.startswith(("/dev/pts/", "127.0.0.1:"))
                for value in simulation.endpoints.values())
+
+
+def test_a_paced_run_keeps_to_its_realtime_factor_and_takes_a_world_by_name(tmp_path):
+    summary_path = tmp_path / "s.json"
+    result = subprocess.run(
+        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--sim", "--world", "slalom",
+         "--teleop", "--realtime-factor", "20", "--duration", "2", "--summary",
+         str(summary_path)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(summary_path.read_text())
+    assert summary["world"] == "slalom" and summary["mode"] == "teleop"
+    # pacing caps the speed (an upper bound: a slow machine cannot make this fail)
+    assert summary["realtime_factor"] <= 20 * 1.05
