@@ -337,6 +337,15 @@ async def _run_system(args: argparse.Namespace) -> int:
     _print_summary(summary)
     if args.summary is not None:
         args.summary.write_text(json.dumps(summary, indent=2))
+    if not summary["stack_up"]:
+        down = [f"{name} ({info['detail'] or info['state']})"
+                for name, info in summary["components"].items() if not info["ever_healthy"]]
+        hint = ""
+        if not args.sim and any("cannot open device" in info["detail"]
+                                for info in summary["components"].values()):
+            hint = " No devices found; did you mean --sim?"
+        print(f"afa run: the stack never came up: {'; '.join(down)}.{hint}", file=sys.stderr)
+        return EXIT_FAILURE
     return EXIT_OK
 
 
@@ -391,8 +400,10 @@ def _summary(system: Any, clock_start: float, wall_start: float) -> dict[str, An
         "events_dropped": statistics["events_dropped"],
         "component_errors": {name: h.failures for name, h in health.items() if h.failures},
         "components": {name: {"state": h.state.value, "healthy": h.healthy, "detail": h.detail,
-                              "restarts": h.restarts, "last_error": h.last_error}
+                              "ever_healthy": h.ever_healthy, "restarts": h.restarts,
+                              "last_error": h.last_error}
                        for name, h in health.items()},
+        "stack_up": all(h.ever_healthy for h in health.values()),
         "not_started": list(system.notes),
     }
 
@@ -410,4 +421,6 @@ def _print_summary(summary: dict[str, Any]) -> None:
           f"{len(summary['component_errors'])} component(s) with errors")
     for name, info in summary["components"].items():
         flag = "ok" if info["healthy"] else f"UNHEALTHY {info['detail']}".strip()
+        if not info["ever_healthy"]:
+            flag += " (never came up)"
         print(f"  {name:24s} {info['state']:9s} restarts={info['restarts']:<3d} {flag}")

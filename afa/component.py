@@ -44,7 +44,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import typing
-from collections.abc import Coroutine
+from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -112,9 +112,15 @@ class RestartPolicy:
         return min(self.maximum, self.initial * self.factor**attempt)
 
 
+def _no_sections(name: str) -> Parameters | None:
+    return None
+
+
 @dataclass
 class Context:
-    """What the runtime gives every component."""
+    """What the runtime gives every component. ``section(name)`` returns the default
+    parameter set of a configuration section shared by several components (the candidate
+    arc set), or None when the system has no such section."""
 
     robot: str
     channel: EventChannel
@@ -123,6 +129,7 @@ class Context:
     devices: DeviceOpener = field(default_factory=DeviceOpener)
     base_dir: Path = field(default_factory=Path.cwd)
     polls: PollLayer | None = None
+    section: Callable[[str], Parameters | None] = _no_sections
 
 
 @dataclass(frozen=True)
@@ -134,6 +141,7 @@ class Health:
     restarts: int
     failures: int
     last_error: str | None
+    ever_healthy: bool = False  #: healthy at some moment of this run
 
 
 class _Forever:
@@ -186,6 +194,7 @@ class Component(Generic[P]):
         self._used: list[Used] = []
         self._healthy = True
         self._health_detail = ""
+        self._ever_healthy = False
         self._state_changed = asyncio.Event()
 
     # -- ports (declare in __init__) ---------------------------------------------------
@@ -199,12 +208,13 @@ class Component(Generic[P]):
 
     def subscribes(self, event_name: str, body_types: type[IDLModel] | tuple[type[IDLModel], ...],
                    handler: Handler, *, domain: str | None = None, maxsize: int = 16,
-                   policy: Overflow = Overflow.DROP_OLDEST) -> Input:
+                   policy: Overflow = Overflow.DROP_OLDEST, required: bool = False) -> Input:
         """Declare a subscription: ``handler(event)`` (sync or async) runs in a task of
         this component for every event whose body is one of ``body_types``. ``*``,
-        ``?`` and ``[...]`` are wildcards in ``event_name``."""
+        ``?`` and ``[...]`` are wildcards in ``event_name``. A ``required`` input keeps
+        the component unhealthy ("waiting for ...") until its first event arrives."""
         types = body_types if isinstance(body_types, tuple) else (body_types,)
-        port = Input(self.name, event_name, types, handler, domain, maxsize, policy)
+        port = Input(self.name, event_name, types, handler, domain, maxsize, policy, required)
         self._inputs.append(port)
         return port
 
@@ -285,11 +295,25 @@ class Component(Generic[P]):
             log = self.log.info if healthy else self.log.warning
             log("%s", f"{self.name}: healthy {detail}".strip() if healthy
                 else f"{self.name}: unhealthy: {detail}")
+        self._note_health()
+
+    def _waiting_for(self) -> list[str]:
+        return [port.name for port in self._inputs if port.required and not port.received]
+
+    def _note_health(self) -> None:
+        if (not self._ever_healthy and self._healthy and self.state is State.RUNNING
+                and not self._waiting_for()):
+            self._ever_healthy = True
 
     def health(self) -> Health:
-        healthy = self._healthy and self.state is State.RUNNING
-        return Health(self.name, self.state, healthy, self._health_detail, self.restarts,
-                      self.failures, None if self.last_error is None else repr(self.last_error))
+        waiting = self._waiting_for() if self.state is State.RUNNING else []
+        healthy = self._healthy and self.state is State.RUNNING and not waiting
+        detail = self._health_detail
+        if waiting and self._healthy:
+            detail = f"waiting for {', '.join(waiting)}"
+        return Health(self.name, self.state, healthy, detail, self.restarts, self.failures,
+                      None if self.last_error is None else repr(self.last_error),
+                      self._ever_healthy)
 
     # -- lifecycle (driven by the supervisor) ------------------------------------------
     def _attach(self, context: Context) -> None:
@@ -301,6 +325,7 @@ class Component(Generic[P]):
         self.state = state
         self._state_changed.set()
         self._state_changed = asyncio.Event()
+        self._note_health()
 
     async def _wait_state_change(self) -> None:
         await self._state_changed.wait()
@@ -350,6 +375,11 @@ class Component(Generic[P]):
         handler = port.handler
         async for event in subscription:
             port.check(event)
+            if not port.received:
+                port.received = 1
+                self._note_health()
+            else:
+                port.received += 1
             try:
                 result = handler(event)
                 if result is not None:
@@ -454,6 +484,7 @@ class PublishServerReactor(Component[P], Generic[P, M]):
     def _started(self) -> None:
         spec = self.device()
         devices = self.context.devices
+        self.set_health(False, "opening the device")  # healthy once the device has spoken
 
         async def open_stream() -> ByteStream:
             return await devices.open(self.name, spec)  # type: ignore[no-any-return]

@@ -108,16 +108,19 @@ class Input:
     """A declared subscription (the handler runs in a task of the component)."""
 
     __slots__ = ("owner", "name", "types", "handler", "domain", "maxsize", "policy",
-                 "rejected", "subscription")
+                 "required", "rejected", "received", "subscription")
 
     def __init__(self, owner: str, name: str, types: tuple[type[IDLModel], ...],
-                 handler: Handler, domain: str | None, maxsize: int, policy: Overflow) -> None:
+                 handler: Handler, domain: str | None, maxsize: int, policy: Overflow,
+                 required: bool = False) -> None:
         if not types or not all(isinstance(t, type) and issubclass(t, IDLModel)
                                 for t in types):
             raise ComponentError(f"{owner}: subscription {name!r} needs IDL model types")
         self.owner, self.name, self.types, self.handler = owner, name, types, handler
         self.domain, self.maxsize, self.policy = domain, maxsize, policy
+        self.required = required  # the component is not healthy before it has one
         self.rejected = 0
+        self.received = 0
         self.subscription: Subscription | None = None
 
     def check(self, event: Event) -> None:

@@ -98,7 +98,8 @@ class Reactor(Generic[M]):
                 try:
                     if self._on_connect is not None:
                         await self._on_connect(stream)
-                    self._on_health(True, "connected")
+                    # connected is not alive: healthy only once the device has spoken
+                    self._on_health(False, "connected, no message from the device yet")
                     await self._read_loop(stream)
                 except EDevIO as exc:  # includes TransportClosed and stale-stream ETimeOut
                     self._on_health(False, f"device lost: {exc}")
@@ -131,6 +132,8 @@ class Reactor(Generic[M]):
             if messages:
                 if dog is not None:  # bytes that decode to nothing (noise) are no sign of life
                     dog.feed()
+                if not self._messages_since_connect:
+                    self._on_health(True, "receiving")
                 self.last_message_time = clock.now()
                 self._messages_since_connect += len(messages)
                 for message in messages:

@@ -178,10 +178,16 @@ class System:
             if factory is not None:
                 self.devices.overrides[component.name] = factory
         component._attach(Context(self.robot, self.channel, self.registry, self.clock,
-                                  self.devices, self.base_dir, self.polls))
+                                  self.devices, self.base_dir, self.polls, self._section))
         if self._running:
             self._launch(component)
         return component
+
+    def _section(self, name: str) -> Any:
+        """The default parameter set of configuration section ``name``, if any."""
+        sections = getattr(self.configuration, "sections", None) or {}
+        sets = sections.get(name)
+        return None if not sets else next(iter(sets.values()))
 
     def catalog(self) -> Catalog:
         """Every declared port of every component (available before start)."""

@@ -75,7 +75,8 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
                 raise ComponentError(
                     f"{name}: Subscriptions names IDL type {binding.Type!r} for "
                     f"{binding.Name!r}; ModelServer fuses {', '.join(SUBSCRIPTION_TYPES)}")
-            self.subscribes(binding.Name, body_type, handlers[body_type], maxsize=64)
+            self.subscribes(binding.Name, body_type, handlers[body_type], maxsize=64,
+                            required=True)
 
     # -- lifecycle ---------------------------------------------------------------------
     async def setup(self) -> None:

@@ -147,6 +147,7 @@ class Stereo(SubscribePublishServer[StereoParameters]):
     # -- lifecycle ---------------------------------------------------------------------
     async def setup(self) -> None:
         self.latest = self.slot("stereo frame")
+        self.set_health(False, "opening the camera")  # healthy once a frame has arrived
 
     async def run(self) -> None:
         """Open the camera, capture at ``frameRate``; on failure reopen with backoff."""
@@ -193,7 +194,7 @@ class Stereo(SubscribePublishServer[StereoParameters]):
             return None
         self._counters["opens"] += 1
         self.backend = backend
-        self.set_health(True, "camera open")
+        self.set_health(False, "camera open, no frame yet")
         return backend
 
     async def _capture_loop(self, backend: CameraBackend) -> None:
@@ -210,6 +211,8 @@ class Stereo(SubscribePublishServer[StereoParameters]):
         except ValueError as exc:
             raise EDevIO(f"bad frame from the camera: {exc}") from exc
         scan = StereoScan(TimeIDL.from_seconds(frame.time), points, valid)
+        if not self.health().healthy:
+            self.set_health(True, "receiving frames")
         self._counters["frames"] += 1
         self._counters["points"] = scan.count
         assert self.latest is not None

@@ -25,12 +25,13 @@ def test_run_reports_what_is_not_implemented_and_stops_cleanly(tmp_path):
     # addresses, which the real-device mode would
     summary = tmp_path / "summary.json"
     result = subprocess.run(
-        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--sim", "--fast", "--duration", "0.5",
+        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--sim", "--fast", "--duration", "3",
          "--summary", str(summary)],
         capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     data = json.loads(summary.read_text())
-    assert data["sim_time_s"] >= 0.5
+    assert data["sim_time_s"] >= 3.0
+    assert data["stack_up"] is True  # every started component was healthy at some point
     for key in ("wall_time_s", "realtime_factor", "events", "events_dropped",
                 "component_errors", "components", "not_started"):
         assert key in data
@@ -41,9 +42,10 @@ def test_run_reports_what_is_not_implemented_and_stops_cleanly(tmp_path):
     assert "not implemented yet" in result.stderr or not data["not_started"]
 
 
-def test_real_device_mode_reports_absent_devices_as_unhealthy(tmp_path):
+def test_real_device_mode_with_no_devices_says_the_stack_never_came_up(tmp_path):
     """Without --sim the drivers open what the XML names; absent devices make their
-    components unhealthy (retrying with backoff) and the run still stops cleanly."""
+    components unhealthy (retrying with backoff), ModelServer waits for inputs that never
+    come, the run stops cleanly and its exit status says the stack never came up."""
     text = RAPTOR.read_text()
     for device in ("/dev/ttyUSB0", "/dev/ttyS0"):
         text = text.replace(f'value="{device}"', f'value="{tmp_path}/no-such-port"')
@@ -60,12 +62,20 @@ def test_real_device_mode_reports_absent_devices_as_unhealthy(tmp_path):
          str(summary)], capture_output=True, text=True, timeout=120, cwd=tmp_path,
         # every device this file names is absent or refused: real-device mode, safely
         env={k: v for k, v in os.environ.items() if k != "AFA_FORBID_REAL_DEVICES"})
-    assert result.returncode == 0, result.stderr
-    components = json.loads(summary.read_text())["components"]
-    for name in ("3dmgService", "GpsSokkiaService", "RaptorService", "NodLaserService"):
+    assert result.returncode == 1, result.stderr
+    assert "the stack never came up" in result.stderr
+    assert "No devices found; did you mean --sim?" in result.stderr
+    assert "Traceback" not in result.stderr
+    data = json.loads(summary.read_text())
+    components = data["components"]
+    assert data["stack_up"] is False
+    for name in ("3dmgService", "GpsSokkiaService", "RaptorService", "RaptorOdometryService",
+                 "NodLaserService", "modelServer"):
         assert components[name]["state"] == "running"
         assert not components[name]["healthy"], components[name]
+        assert not components[name]["ever_healthy"], components[name]  # never, not flapping
     assert "no-such-port" in components["3dmgService"]["detail"]
+    assert components["modelServer"]["detail"] == "waiting for Gps, Imu"
 
 
 def test_run_with_a_bad_config_exits_2_without_traceback(tmp_path, capsys):

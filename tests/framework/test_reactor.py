@@ -228,3 +228,30 @@ async def test_send_while_disconnected_is_edevio():
         with pytest.raises(EDevIO):
             await counter.send(b"hello")
         assert counter.state is State.RUNNING and not counter.health().healthy
+
+
+async def test_a_device_that_connects_but_never_answers_is_never_healthy():
+    """Connected is not alive: a port that opens (a cable, a wrong baud rate) but yields
+    no decoded message keeps the component unhealthy, and the run says it never came up."""
+    clock = VirtualClock(start=0.0)
+    silent = FakeDevice(clock)  # accepts the connection, sends nothing
+    counter = Counter("Counter")
+    async with System([counter], clock=clock, devices={"Counter": silent.factory()}):
+        await clock.advance(0.5)
+        health = counter.health()
+        assert not health.healthy and health.detail == "connected, no message from the device yet"
+        await clock.advance(5.0)  # stale after 1 s: reconnects, and is still not healthy
+        health = counter.health()
+        assert not health.healthy and not health.ever_healthy
+        await silent.aclose()
+
+
+async def test_a_device_that_answers_once_has_been_healthy():
+    clock = VirtualClock(start=0.0)
+    talker = Talker(clock)
+    counter = Counter("Counter")
+    async with System([counter], clock=clock, devices={"Counter": talker.factory()}):
+        await clock.advance(0.5)
+        assert counter.health().healthy and counter.health().detail == "receiving"
+        assert counter.health().ever_healthy
+        await talker.aclose()
