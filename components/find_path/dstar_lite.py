@@ -66,6 +66,7 @@ Exceptions::
 from __future__ import annotations
 
 import enum
+import functools
 import heapq
 import math
 from collections.abc import Sequence
@@ -914,13 +915,20 @@ class DStarLite:
         heapq.heapify(self._heap)
 
 
+_DIRECTIONS = tuple((ox, oy) for ox in (-1, 0, 1) for oy in (-1, 0, 1) if (ox, oy) != (0, 0))
+_STEPS = np.array([SQRT2 if ox and oy else 1.0 for ox, oy in _DIRECTIONS])
+
+
 def reverse_graph(cost: npt.ArrayLike) -> csr_matrix:
     """The reversed edge graph of a cost grid, for scipy's shortest-path routines.
 
-    Node ``x * ny + y`` is cell ``(x, y)``; row ``v``, column ``u`` holds ``c(u, v)`` of the
-    module's edge model for every finite edge ``u -> v``, so ``dijkstra(graph,
-    indices=goal)`` gives every cell's exact cost *to* the goal. Built vectorised (no
-    per-cell Python): rows in order, columns ascending within a row.
+    Node ``x * ny + y`` is cell ``(x, y)``; row ``v`` holds, for each of the eight
+    directions, the edge into ``v`` from its neighbour ``u`` with weight ``c(u, v)`` of
+    the module's edge model, so ``dijkstra(graph, indices=goal)`` gives every cell's
+    exact cost *to* the goal. Every row has exactly eight entries: impassable and
+    corner-cut edges, and neighbours outside the grid (as self-loops), are stored with
+    weight ``inf``, which no shortest path uses. That keeps the structure fixed per grid
+    shape (cached), so a build is a few vectorised passes over the costs.
 
     Raises:
         GridError: ``cost`` is not a non-empty 2-D array of costs >= 1 or +inf.
@@ -930,30 +938,39 @@ def reverse_graph(cost: npt.ArrayLike) -> csr_matrix:
         raise GridError(f"cost must be a non-empty 2-D array, got shape {cv.shape}")
     _check_costs(cv)
     nx, ny = cv.shape
-    p = np.full((nx + 2, ny + 2), np.inf)
-    p[1:-1, 1:-1] = cv
+    indices, indptr, outside = _graph_structure(nx, ny)
+    blocked = np.ones((nx + 2, ny + 2), dtype=bool)
+    blocked[1:-1, 1:-1] = np.isinf(cv)
+    data = np.multiply.outer(cv, _STEPS)  # (nx, ny, 8): c(u, v) = cost[v] * step
+    data[outside] = np.inf
+    for k, (ox, oy) in enumerate(_DIRECTIONS):
+        if ox and oy:
+            # u = v + (ox, oy); the corners of the move u -> v are v + (ox, 0), v + (0, oy)
+            cut = blocked[1 + ox:nx + 1 + ox, 1:-1] & blocked[1:-1, 1 + oy:ny + 1 + oy]
+            data[:, :, k][cut] = np.inf
+    return csr_matrix((data.reshape(-1), indices, indptr), shape=(nx * ny, nx * ny))
+
+
+@functools.lru_cache(maxsize=4)
+def _graph_structure(nx: int, ny: int) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32],
+                                                npt.NDArray[np.bool_]]:
+    """Column indices, row pointers and outside-the-grid mask of reverse_graph (read-only)."""
+    if 8 * nx * ny >= 2**31:
+        raise GridError(f"a {nx} x {ny} grid is too large for 32-bit graph indices")
+    v = np.arange(nx * ny, dtype=np.int64).reshape(nx, ny)
     xs = np.arange(nx)[:, None]
     ys = np.arange(ny)[None, :]
-    weights = np.empty((nx, ny, 8))
-    cols_off = np.empty(8, dtype=np.int64)
-    for k, (ox, oy) in enumerate((ox, oy) for ox in (-1, 0, 1) for oy in (-1, 0, 1)
-                                 if (ox, oy) != (0, 0)):
-        # u = v + (ox, oy) is the source of the edge u -> v (direction -(ox, oy))
+    indices = np.empty((nx, ny, 8), dtype=np.int32)
+    outside = np.empty((nx, ny, 8), dtype=bool)
+    for k, (ox, oy) in enumerate(_DIRECTIONS):
         inside = (xs + ox >= 0) & (xs + ox < nx) & (ys + oy >= 0) & (ys + oy < ny)
-        wk = np.where(inside, cv * (SQRT2 if ox and oy else 1.0), np.inf)
-        if ox and oy:
-            # the corners of the move u -> v are v + (ox, 0) and v + (0, oy)
-            cut = np.isinf(p[1 + ox:nx + 1 + ox, 1:-1]) & np.isinf(p[1:-1, 1 + oy:ny + 1 + oy])
-            wk[cut] = np.inf
-        weights[:, :, k] = wk
-        cols_off[k] = ox * ny + oy
-    flat_weights = weights.reshape(nx * ny, 8)
-    valid = np.isfinite(flat_weights)
-    indptr = np.zeros(nx * ny + 1, dtype=np.int64)
-    np.cumsum(valid.sum(axis=1), out=indptr[1:])
-    rows = np.arange(nx * ny, dtype=np.int64)[:, None]
-    indices = (rows + cols_off[None, :])[valid]
-    return csr_matrix((flat_weights[valid], indices, indptr), shape=(nx * ny, nx * ny))
+        indices[:, :, k] = np.where(inside, v + (ox * ny + oy), v)
+        outside[:, :, k] = ~inside
+    indptr = np.arange(0, 8 * nx * ny + 1, 8, dtype=np.int32)
+    flat_indices = indices.reshape(-1)
+    for array in (flat_indices, indptr, outside):
+        array.flags.writeable = False
+    return flat_indices, indptr, outside
 
 
 def _check_costs(values: npt.NDArray[Any]) -> None:
