@@ -211,8 +211,6 @@ class DStarLite:
         border = np.ones(self._padded.shape, dtype=bool)
         border[1:-1, 1:-1] = False
         self._border = border.ravel()
-        self._offsets = np.array([o for o, _, _, _ in self._nbrs], dtype=np.int64)
-        self._steps = np.array([SQRT2 if d else 1.0 for _, d, _, _ in self._nbrs])
         self._start = self._flat(start, "start")
         self._goal = self._flat(goal, "goal")
         self._fallback_expansions = max(
@@ -352,8 +350,7 @@ class DStarLite:
         if not changed.any():
             return 0
         cells = cells[changed]
-        new = new[changed]
-        self._apply_cost_changes(cells, new)
+        self._apply_cost_changes(cells.tolist(), new[changed].tolist())
         return int(cells.size)
 
     def update_grid(self, cost: npt.ArrayLike) -> int:
@@ -655,62 +652,72 @@ class DStarLite:
                 arg = t
         return arg
 
-    def _apply_cost_changes(self, cells: npt.NDArray[np.int64], new: FloatArray) -> None:
-        """Set the costs of distinct padded ``cells`` and repair the affected rhs values."""
+    def _apply_cost_changes(self, cells: list[int], new: list[float]) -> None:
+        """Set the costs of distinct padded ``cells`` and repair the affected rhs values.
+
+        The edges whose cost can change are those entering a changed cell, and, when a cell
+        turns impassable or passable, the diagonals that have it as a corner. Each source
+        vertex with a changed edge then gets the optimized rule (module docstring of
+        :meth:`update_costs`). Plain Python: a scan changes tens of cells, where numpy's
+        per-call overhead would dominate.
+        """
         self._sync_km()
-        offs = self._offsets
-        # the sources whose outgoing edges can change: the 8 neighbours of each cell
-        sources = np.unique((cells[:, None] + offs[None, :]).ravel())
-        sources = sources[~self._border[sources]]
-        old_edges = self._edge_matrix(sources, offs)
-        flat_cost = self._padded.reshape(-1)
-        flat_cost[cells] = new
         cost = self._cost
-        for cell, value in zip(cells.tolist(), new.tolist(), strict=True):
-            cost[cell] = value
-        new_edges = self._edge_matrix(sources, offs)
-        differs = old_edges != new_edges
-        rows = np.flatnonzero(differs.any(axis=1))
+        frozen = self._frozen
+        nbrs = self._nbrs
+        inf = _INF
+        # the changed edges (source, direction) -> old cost; the edge model of _edge, inlined
+        old: dict[tuple[int, int], float] = {}
+        for v, value in zip(cells, new, strict=True):
+            cv = cost[v]
+            for k, (off, diag, ca, cb) in enumerate(nbrs):
+                s = v - off  # the edge s -> v
+                if frozen[s] or (s, k) in old:
+                    continue
+                if diag:
+                    old[(s, k)] = (inf if cost[s + ca] == inf and cost[s + cb] == inf
+                                   else cv * SQRT2)
+                else:
+                    old[(s, k)] = cv
+            if (cv == inf) != (value == inf):
+                for k, (off, diag, ca, cb) in enumerate(nbrs):
+                    if not diag:
+                        continue
+                    for s in (v - ca, v - cb):  # v is a corner of the move s -> s + off
+                        if frozen[s] or (s, k) in old:
+                            continue
+                        old[(s, k)] = (inf if cost[s + ca] == inf and cost[s + cb] == inf
+                                       else cost[s + off] * SQRT2)
+        for v, value in zip(cells, new, strict=True):
+            cost[v] = value
+        self._padded.reshape(-1)[cells] = new
         g = self._g
         rhs = self._rhs
-        frozen = self._frozen
-        nbr_offsets = self._offsets.tolist()
-        for s, olds, news, diff in zip(sources[rows].tolist(), old_edges[rows].tolist(),
-                                       new_edges[rows].tolist(), differs[rows].tolist(),
-                                       strict=True):
-            if frozen[s]:
+        # per source: the lowest new candidate, or a full recomputation if a dearer edge
+        # was the source's best
+        best: dict[int, float] = {}
+        full: set[int] = set()
+        for (s, k), c_old in old.items():
+            off, diag, ca, cb = nbrs[k]
+            if diag:
+                c_new = (inf if cost[s + ca] == inf and cost[s + cb] == inf
+                         else cost[s + off] * SQRT2)
+            else:
+                c_new = cost[s + off]
+            if c_new == c_old or s in full:
                 continue
-            r_old = rhs[s]
-            best = r_old
-            full = False
-            for k in range(8):
-                if not diff[k]:
-                    continue
-                c_old = olds[k]
-                c_new = news[k]
-                g_t = g[s + nbr_offsets[k]]
-                if c_new < c_old:
-                    v = c_new + g_t
-                    if v < best:
-                        best = v
-                elif r_old != _INF and r_old == c_old + g_t:
-                    full = True
-                    break
-            rhs[s] = self._best_rhs(s) if full else best
+            g_t = g[s + off]
+            if c_new < c_old:
+                candidate = c_new + g_t
+                if candidate < best.get(s, rhs[s]):
+                    best[s] = candidate
+            elif rhs[s] != inf and rhs[s] == c_old + g_t:
+                full.add(s)
+        for s in sorted(full | best.keys()):
+            rhs[s] = self._best_rhs(s) if s in full else best[s]
             self._update_vertex(s)
         self._changed_since_compute = True
         self._dirty = True
-
-    def _edge_matrix(self, sources: npt.NDArray[np.int64],
-                     offs: npt.NDArray[np.int64]) -> FloatArray:
-        """c(s, s + off) for every source (rows) and neighbour offset (columns)."""
-        flat = self._padded.reshape(-1)
-        edges = flat[sources[:, None] + offs[None, :]] * self._steps[None, :]
-        for k, (_, diag, ca, cb) in enumerate(self._nbrs):
-            if diag:
-                cut = np.isinf(flat[sources + ca]) & np.isinf(flat[sources + cb])
-                edges[cut, k] = np.inf
-        return edges
 
     def _settle(self, target: int, max_expansions: int | None) -> bool:
         """ComputeShortestPath (optimized, Figure 4) until ``target`` is settled.
