@@ -24,10 +24,11 @@ A diagonal move from ``(x, y)`` to ``(x + dx, y + dy)`` is *corner-cut*, and for
 when both cells it passes between, ``(x + dx, y)`` and ``(x, y + dy)``, are impassable:
 the vehicle may brush past one obstacle corner but not squeeze between two. The cost
 of the cell being left plays no part, so an impassable cell still has finite outgoing
-edges (a vehicle the map puts inside an obstacle can drive out of it), and ``cost[v]``
-is multiplied by the step length before it is added (``cost[v] * sqrt(2) + g(v)``,
-always in that order, so equal routes give bit-equal sums). A path's cost is the sum of
-its edges; the start cell's own cost is not paid.
+edges (a vehicle the map puts inside an obstacle can drive out of it). Sums are formed
+as ``cost[v] * step + g(v)``, the step multiplied first, which is also what a Dijkstra
+over :func:`reverse_graph` does, so the incremental state, :meth:`DStarLite.rebuild` and
+such an oracle agree bit for bit. A path's cost is the sum of its edges; the start
+cell's own cost is not paid.
 
 Heuristic: the octile distance between cells, ``max(|dx|,|dy|) + (sqrt(2) - 1) *
 min(|dx|,|dy|)``, scaled down by ``1 - 1e-10`` so rounding can never make it exceed a
@@ -47,7 +48,7 @@ its measurements are in ``docs/decisions/draft-dstar-fallback.md``).
 Typical use (one planning cycle of the component)::
 
     planner = DStarLite(cost, start=(5, 5), goal=(150, 140))
-    planner.rebuild()                        # the first plan, from scratch
+    planner.replan()                         # the first plan
     ...
     planner.move_start(vehicle_cell)         # move ...
     planner.update_costs(xs, ys, new_costs)  # ... scan ...
@@ -61,6 +62,8 @@ Exceptions::
     ├── GridError (ValueError)    a cost array, cost value or cell argument is invalid
     └── PlanNotReadyError (RuntimeError)
                                   path() asked for while the start is not settled
+
+plus the builtin ``ValueError`` for a negative expansion cap or budget.
 """
 
 from __future__ import annotations
@@ -96,10 +99,13 @@ _INF = math.inf
 _H_SCALE = 1.0 - 1e-10  # keeps the float heuristic below every float path cost
 _NOT_QUEUED = -1.0  # key sentinel: real keys are >= 0
 
-# Fallback rule (docs/decisions/draft-dstar-fallback.md): the expansion budget of an
-# incremental replan, per grid cell, before a from-scratch rebuild is cheaper.
+# The fallback rule (docs/decisions/draft-dstar-fallback.md): replan() lets an incremental
+# repair run for max(FALLBACK_MIN_EXPANSIONS, FALLBACK_EXPANSIONS_PER_CELL * cells)
+# expansions, then rebuilds from scratch. Measured on a 2-core machine: a rebuild costs
+# ~0.3 us per cell plus ~0.25 ms, an expansion 3-4 us (cost decreases) to 6-12 us (cost
+# increases), so the break-even is 0.03-0.09 expansions per cell.
 FALLBACK_EXPANSIONS_PER_CELL = 0.05
-FALLBACK_MIN_EXPANSIONS = 2000
+FALLBACK_MIN_EXPANSIONS = 64
 
 Cell = tuple[int, int]
 FloatArray = npt.NDArray[np.float64]
@@ -176,18 +182,24 @@ class DStarLite:
     """Incremental shortest paths from a moving start to a fixed goal on a cost grid.
 
     The constructor only initialises (``g = rhs = inf``, ``rhs(goal) = 0``, the goal
-    queued); plan with :meth:`compute` (incremental search, cheap when the start is near
-    the goal) or :meth:`rebuild` (exact, from scratch, usually faster for a first plan on
-    a large grid). The cost array is copied; later changes go through
-    :meth:`update_costs` or :meth:`update_grid`.
+    queued); plan with :meth:`replan` (incremental within a budget, else from scratch),
+    :meth:`compute` (incremental only, optionally capped) or :meth:`rebuild` (from scratch
+    only). The cost array is copied; later changes go through :meth:`update_costs` or
+    :meth:`update_grid`. ``fallback_expansions`` overrides :meth:`replan`'s default budget
+    (``max(64, 0.05 * cells)``, see the module constants).
 
     Raises:
         GridError: ``cost`` is not a non-empty 2-D array of finite values >= 1 or +inf,
             or ``start``/``goal`` is not a cell of the grid.
+        ValueError: ``fallback_expansions`` is negative.
     """
 
-    def __init__(self, cost: npt.ArrayLike, start: Sequence[int], goal: Sequence[int]) -> None:
-        grid = np.array(cost, dtype=np.float64)  # a copy, never the caller's array
+    def __init__(self, cost: npt.ArrayLike, start: Sequence[int], goal: Sequence[int], *,
+                 fallback_expansions: int | None = None) -> None:
+        try:
+            grid = np.array(cost, dtype=np.float64)  # a copy, never the caller's array
+        except (TypeError, ValueError) as exc:
+            raise GridError(f"cost must be a 2-D array of numbers: {exc}") from exc
         if grid.ndim != 2 or grid.size == 0:
             raise GridError(f"cost must be a non-empty 2-D array, got shape {grid.shape}")
         _check_costs(grid)
@@ -201,10 +213,11 @@ class DStarLite:
         xs, ys = np.divmod(np.arange(n), w)
         self._xs: list[int] = xs.tolist()
         self._ys: list[int] = ys.tolist()
-        # (offset, diagonal, corner offset a, corner offset b), ascending offsets; for a
-        # move in direction (ox, oy) the corners are at (ox, 0) and (0, oy) from the
-        # source, and seen from the target of the move at (-ox, 0)/(0, -oy) ... which, for
-        # a predecessor at offset (ox, oy) of the target, is again (ox, 0) and (0, oy).
+        # Neighbour table, ascending flat offsets (the documented tie-break order):
+        # (offset, diagonal, corner a, corner b). A move from s to s + (ox, oy) passes the
+        # corners s + (ox, 0) and s + (0, oy). The same numbers serve the backward view:
+        # for the predecessor p = u + (ox, oy) of u, the move p -> u passes u + (ox, 0)
+        # and u + (0, oy), again the table's corner offsets, now taken from u.
         self._nbrs: tuple[tuple[int, bool, int, int], ...] = tuple(
             (ox * w + oy, ox != 0 and oy != 0, ox * w, oy)
             for ox in (-1, 0, 1) for oy in (-1, 0, 1) if (ox, oy) != (0, 0))
@@ -213,8 +226,12 @@ class DStarLite:
         self._border = border.ravel()
         self._start = self._flat(start, "start")
         self._goal = self._flat(goal, "goal")
-        self._fallback_expansions = max(
-            FALLBACK_MIN_EXPANSIONS, int(FALLBACK_EXPANSIONS_PER_CELL * self._nx * self._ny))
+        if fallback_expansions is None:
+            fallback_expansions = max(FALLBACK_MIN_EXPANSIONS,
+                                      int(FALLBACK_EXPANSIONS_PER_CELL * self._nx * self._ny))
+        elif fallback_expansions < 0:
+            raise ValueError(f"fallback_expansions must be >= 0, got {fallback_expansions}")
+        self._fallback_expansions = fallback_expansions
         # search state, set by _reset() and rebuild(); qk1/qk2 hold each queued vertex's
         # stored key (_NOT_QUEUED otherwise), heap entries (k1, k2, vertex) may be stale
         self._g: list[float] = []
@@ -320,14 +337,14 @@ class DStarLite:
             GridError: the arrays differ in length, a cell is outside the grid, or a cost
                 is NaN, below 1 or -inf. Nothing is changed then.
         """
-        x = np.atleast_1d(np.asarray(xs))
-        y = np.atleast_1d(np.asarray(ys))
-        c = np.atleast_1d(np.asarray(costs, dtype=np.float64))
         try:
+            x = np.atleast_1d(np.asarray(xs))
+            y = np.atleast_1d(np.asarray(ys))
+            c = np.atleast_1d(np.asarray(costs, dtype=np.float64))
             x, y, c = np.broadcast_arrays(x, y, c)
-        except ValueError as exc:
-            raise GridError(f"xs, ys and costs differ in shape: {np.shape(xs)}, "
-                            f"{np.shape(ys)}, {np.shape(costs)}") from exc
+        except (TypeError, ValueError) as exc:
+            raise GridError(f"xs, ys and costs must be numeric arrays of one length: "
+                            f"{exc}") from exc
         if x.ndim != 1:
             raise GridError("xs, ys and costs must be one-dimensional")
         if x.size == 0:
@@ -361,7 +378,10 @@ class DStarLite:
         Raises:
             GridError: ``cost`` has another shape or holds an invalid cost.
         """
-        grid = np.asarray(cost, dtype=np.float64)
+        try:
+            grid = np.asarray(cost, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise GridError(f"cost must be a 2-D array of numbers: {exc}") from exc
         if grid.shape != (self._nx, self._ny):
             raise GridError(f"cost grid has shape {grid.shape}, the planner "
                             f"{(self._nx, self._ny)}")
@@ -416,9 +436,11 @@ class DStarLite:
         """:meth:`compute` with the from-scratch fallback: never ``CAPPED``.
 
         The incremental repair gets ``max_expansions`` expansions (default
-        :attr:`fallback_expansions`, the measured break-even with a rebuild); if that is
-        not enough, the state is rebuilt from scratch. A repair can thus cost at most about
-        twice a rebuild, and usually costs far less.
+        :attr:`fallback_expansions`, about the measured break-even with a rebuild); if
+        that is not enough, the state is rebuilt from scratch. A replan thus costs at most
+        the budget plus a rebuild (measured: up to ~3 rebuilds, since an expansion costs
+        3-12 us depending on the change), and usually far less. Deterministic: the
+        decision counts expansions, not time.
 
         Raises:
             ValueError: ``max_expansions`` is negative.
@@ -469,9 +491,11 @@ class DStarLite:
         after that many cells (the component needs only the lookahead).
 
         Raises:
-            PlanNotReadyError: the start is not settled (changes or an off-path move since
-                the last compute, or the last compute was capped).
+            PlanNotReadyError: the start is not settled (changes or a move since the last
+                compute, or the last compute was capped).
             ValueError: ``max_cells`` is below 1.
+            PlannerError: the descent got stuck, which means the state is corrupt (a bug,
+                never expected).
         """
         if self._dirty:
             raise PlanNotReadyError("the start is not settled: call compute() (or replan()) "
@@ -940,7 +964,10 @@ def reverse_graph(cost: npt.ArrayLike) -> csr_matrix:
     Raises:
         GridError: ``cost`` is not a non-empty 2-D array of costs >= 1 or +inf.
     """
-    cv = np.asarray(cost, dtype=np.float64)
+    try:
+        cv = np.asarray(cost, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise GridError(f"cost must be a 2-D array of numbers: {exc}") from exc
     if cv.ndim != 2 or cv.size == 0:
         raise GridError(f"cost must be a non-empty 2-D array, got shape {cv.shape}")
     _check_costs(cv)

@@ -416,7 +416,7 @@ def test_rebuild_gives_the_exact_state_everywhere_and_increments_stay_exact() ->
 def test_replan_falls_back_to_a_rebuild_when_the_budget_runs_out() -> None:
     cost, xs, ys = _big_change_scenario()
     planner = DStarLite(cost, (0, 0), (29, 29))
-    assert planner.replan() is PlanStatus.DONE
+    assert planner.compute() is PlanStatus.DONE
     planner.update_costs(xs, ys, np.full(xs.size, INF))
     cost[xs, ys] = INF
     assert planner.replan(max_expansions=5) is PlanStatus.DONE
@@ -430,11 +430,19 @@ def test_replan_falls_back_to_a_rebuild_when_the_budget_runs_out() -> None:
     check_planner(planner, cost)
 
 
-def test_the_default_budget_scales_with_the_grid() -> None:
+def test_the_budget_scales_with_the_grid_and_can_be_set() -> None:
     small = DStarLite(np.ones((10, 10)), (0, 0), (9, 9))
     large = DStarLite(np.ones((400, 400)), (0, 0), (9, 9))
-    assert small.fallback_expansions >= 1
-    assert large.fallback_expansions > small.fallback_expansions
+    assert 1 <= small.fallback_expansions < large.fallback_expansions
+    chosen = DStarLite(np.ones((4, 4)), (0, 0), (3, 3), fallback_expansions=7)
+    assert chosen.fallback_expansions == 7
+    with pytest.raises(ValueError):
+        DStarLite(np.ones((4, 4)), (0, 0), (3, 3), fallback_expansions=-1)
+    cost, xs, ys = _big_change_scenario()
+    planner = DStarLite(cost, (0, 0), (29, 29), fallback_expansions=0)
+    assert planner.replan() is PlanStatus.DONE  # a zero budget: always from scratch
+    assert planner.statistics().rebuilds == 1
+    check_planner(planner, cost)
 
 
 # ---------------------------------------------------------------------- the moving robot
