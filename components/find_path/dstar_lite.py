@@ -136,7 +136,8 @@ class PlannerStatistics:
     """Counters since construction (or the last :meth:`DStarLite.set_goal`).
 
     ``last_expansions`` counts the vertices the last compute expanded (made consistent or
-    reset to underconsistent); ``last_reinsertions`` the queue entries it only re-keyed.
+    reset to underconsistent), ``last_reinsertions`` the queue entries it only re-keyed;
+    a rebuild leaves both alone, so after a fallback they describe the capped attempt.
     """
 
     last_expansions: int
@@ -475,8 +476,6 @@ class DStarLite:
         self._last = self._start
         self._changed_since_compute = False
         self._dirty = False
-        self._last_expansions = 0
-        self._last_reinsertions = 0
         self._rebuilds += 1
         return PlanStatus.DONE if self._g[self._start] < _INF else PlanStatus.NO_PATH
 
