@@ -38,6 +38,12 @@ one of them) span 2κ_max in n − 1 steps, so n ≥ 2κ_max/Δκ + 1 = 26.3: **
 (Δκ = 0.02337 1/m, 0.292 m apart 5 m ahead). 25 arcs would be 0.317 m apart, too sparse.
 :func:`minimum_count` does this arithmetic; a test keeps the default equal to it.
 
+The bound is on arc length. Measured on the line x = 5 m across the heading, arcs cross
+it farther apart off to the side (a turning arc meets that line obliquely): 0.293, 0.299
+and 0.313 m between the crossings at 0, ±0.29, ±0.59 and ±0.91 m. So a gate square to
+the heading is threaded with the full W_free/4 margin while its centre is within ±0.6 m
+of the heading, and with a little less beyond.
+
 Votes
 -----
 :class:`ArcVotes` is what a behaviour computes over the set: per-arc veto, vote 0..1,
