@@ -304,7 +304,8 @@ class ArcSweepScorer:
 
     ``parameters`` supplies the scoring flags and speeds (Table A.10); ``hazard_threshold``
     the hazard at and above which a cell is an obstacle. Raises ValueError if the
-    threshold is not in (0, 1].
+    threshold is not in (0, 1]. The scorer reuses its own buffers: one scorer per
+    component task, not shared across threads.
     """
 
     def __init__(self, tables: SweepTables, parameters: ObstacleAvoidanceParameters, *,

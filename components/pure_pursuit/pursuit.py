@@ -270,7 +270,7 @@ class PurePursuit:
         return self._patrol
 
     def set_patrol(self, patrol: bool) -> None:
-        """``setPatrolMode``. Turning patrol off while heading back to w0 keeps that leg."""
+        """``setPatrolMode``. Turned off, the current pass through the list is the last."""
         self._patrol = patrol
 
     @property
