@@ -331,6 +331,8 @@ class ArcSweepScorer:
         self._reference = reference
         self._certainty_ones = np.ones(len(tables.arcs))
         self._arange = np.arange(len(tables.arcs))
+        self._discounted = p.DistFactor > 0.0 and p.MinDistDiscount < 1.0
+        self._max_speed = np.full(len(tables.arcs), p.MaxVelocity)
 
     def score(self, hazard: NDArray[Any], goodness: NDArray[Any]) -> SweepScores:
         """Score every arc on one map's ``hazard`` (0..1, NaN unknown) and ``goodness``
@@ -366,24 +368,31 @@ class ArcSweepScorer:
             first = blocked.argmax(axis=1)
             free = np.where(blocked[arange, first], reach[arange, first], np.inf)
             np.minimum(free, self._horizons, out=free)
-        # fmax skips NaN: an unknown cell (not an obstacle here) adds no roughness.
-        rough = np.fmax.reduce(h * self._weight * (reach < free[:, None]), axis=1, initial=0.0)
+        # fmax skips NaN: an unknown cell (not an obstacle here) adds no roughness. The
+        # pad cells have hazard 0, so without a discount the weights need no multiply.
+        passed = reach < free[:, None]
+        weighted = h * self._weight if self._discounted else h
+        rough = np.fmax.reduce(weighted * passed, axis=1, initial=0.0)
         used = reach <= free[:, None]
-        n_used = used.sum(axis=1)
-        certainty = (self._goodness.take(cells) * used).sum(axis=1) / np.maximum(n_used, 1)
-        if self._norm > 0.0:
+        n_used = np.count_nonzero(used, axis=1)
+        # Means of values in 0..1 stay in 0..1 in floating point (rounding is monotonic).
+        certainty = np.add.reduce(self._goodness.take(cells) * used, axis=1)
+        certainty /= np.maximum(n_used, 1)
+        if self._discounted:
             clear = discounted_distance(np.minimum(free, self._reference), p.DistFactor,
                                         p.MinDistDiscount) / self._norm
+        elif self._norm > 0.0:
+            clear = np.minimum(free, self._reference) / self._norm
         else:
             clear = self._certainty_ones
-        vote = np.clip(clear * (1.0 - rough), 0.0, 1.0)
+        vote = clear * (1.0 - rough)  # both factors in 0..1
         veto = hit
         if p.DiscountSpeeds:
             speed = p.MinVelocity + (p.MaxVelocity - p.MinVelocity) * vote
         else:
-            speed = np.full(vote.shape, p.MaxVelocity)
+            speed = self._max_speed.copy()
         speed[veto] = 0.0
-        votes = ArcVotes.unchecked(veto, vote, np.clip(certainty, 0.0, 1.0), speed)
+        votes = ArcVotes.unchecked(veto, vote, certainty, speed)
         return SweepScores(votes=votes,
                            obstacle_distance=obstacle_distance, free_distance=free,
                            horizons=self._horizons)
