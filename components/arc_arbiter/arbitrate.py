@@ -44,7 +44,10 @@ The decision
 **Fail-safe** (speed 0, steering straight, ``failsafe`` names the cause):
 ``"no-fresh-vote"`` (nothing fresh), ``"all-vetoed"`` (every arc vetoed by a fresh vote),
 ``"no-valid-vote"`` (no admissible arc has a positive score: every fresh vote weighs
-nothing there, by weight, certainty or vote, so nothing says where to go). Steering is
+nothing there, by weight, certainty or vote, so nothing says where to go), and
+``"missing-required"`` (a behaviour named in ``required`` has no fresh vote: e.g.
+``required={"PurePursuit"}`` stops the vehicle when goal seeking dies, instead of letting
+Obstacle Avoidance alone wander on; empty by default, the seed's behaviour). Steering is
 straight rather than the last command: the decision stays a function of the vote book
 alone, and a stopped vehicle restarts on a predictable course.
 
@@ -58,6 +61,7 @@ Votes over another arc set (other count or curvatures) are refused by
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -76,7 +80,7 @@ __all__ = [
     "weight_for",
 ]
 
-Failsafe = Literal["no-fresh-vote", "all-vetoed", "no-valid-vote"]
+Failsafe = Literal["no-fresh-vote", "missing-required", "all-vetoed", "no-valid-vote"]
 
 #: Behaviour name (``ArcVoteIDL.behaviour``) → the ArcArbiterParameters weight field.
 BEHAVIOUR_WEIGHTS: dict[str, str] = {
@@ -140,16 +144,18 @@ class _Entry:
 class VoteArbiter:
     """The vote book and the decision rule (module docstring).
 
+    ``required`` names behaviours without whose fresh vote the vehicle must stop.
     Raises ValueError for a negative or non-finite ``unknown_weight``.
     """
 
     def __init__(self, parameters: ArcArbiterParameters, arcs: ArcSet, *,
-                 unknown_weight: float = 0.0) -> None:
+                 unknown_weight: float = 0.0, required: Iterable[str] = ()) -> None:
         if not (math.isfinite(unknown_weight) and unknown_weight >= 0.0):
             raise ValueError(f"unknown_weight must be finite and ≥ 0, got {unknown_weight}")
         self.parameters = parameters
         self.arcs = arcs
         self.unknown_weight = float(unknown_weight)
+        self.required = frozenset(required)
         self.stale_after = parameters.stale_vote_time
         self._book: dict[str, _Entry] = {}
         self._seen: set[str] = set()
@@ -217,6 +223,8 @@ class VoteArbiter:
         for entry in entries[1:]:
             scores += entry.weighted
             vetoed |= entry.veto
+        if self.required and not self.required <= self._book.keys():
+            return self._stop(now, scores, vetoed, fresh, stale, unknown, "missing-required")
         if vetoed.all():
             return self._stop(now, scores, vetoed, fresh, stale, unknown, "all-vetoed")
         admissible = np.where(vetoed, -np.inf, scores)

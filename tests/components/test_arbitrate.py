@@ -212,6 +212,20 @@ def test_nothing_to_steer_by_is_a_stop():
     assert d.failsafe == "no-valid-vote" and d.stopped and d.index == MID
 
 
+def test_a_required_behaviour_without_a_fresh_vote_is_a_stop():
+    a = VoteArbiter(ArcArbiterParameters(), ARCS, required={"PurePursuit"})
+    a.receive(vote("ObstacleAvoidance", votes=np.ones(N)), 0.0)
+    assert a.decide(0.0).failsafe == "missing-required"
+    a.receive(vote("PurePursuit", peak=3), 0.5)
+    assert a.decide(0.5).failsafe is None
+    a.receive(vote("ObstacleAvoidance", votes=np.ones(N)), 2.0)
+    d = a.decide(2.1)  # Pure Pursuit silent since 0.5: stale
+    assert d.failsafe == "missing-required" and d.stopped and d.stale == ("PurePursuit",)
+    plain = arbiter()  # the seed's arbiter: Obstacle Avoidance alone still drives
+    plain.receive(vote("ObstacleAvoidance", votes=np.ones(N)), 0.0)
+    assert plain.decide(0.0).failsafe is None
+
+
 def test_ties_go_to_the_straighter_arc_then_the_left_one():
     a = arbiter()
     a.receive(vote("PurePursuit", votes=np.ones(N)), 0.0)
