@@ -159,6 +159,7 @@ class VoteArbiter:
         self.stale_after = parameters.stale_vote_time
         self._book: dict[str, _Entry] = {}
         self._seen: set[str] = set()
+        self._names: tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]] | None = None
         n = len(arcs)
         # Preference among tied arcs: straighter first, then left (positive curvature).
         order = sorted(range(n), key=lambda k: (abs(float(arcs.curvatures[k])),
@@ -182,13 +183,16 @@ class VoteArbiter:
         known = vote.behaviour in BEHAVIOUR_WEIGHTS
         weight = weight_for(vote.behaviour, self.parameters, self.unknown_weight)
         weighted = weight * vote.certainty.astype(np.float64) * vote.vote.astype(np.float64)
+        if vote.behaviour not in self._book:
+            self._names = None
         self._book[vote.behaviour] = _Entry(vote, float(received), weighted, vote.veto,
                                             vote.maxSpeed.astype(np.float64), known)
         self._seen.add(vote.behaviour)
 
     def forget(self, behaviour: str) -> None:
         """Drop a behaviour's vote at once (e.g. the component unsubscribed it)."""
-        self._book.pop(behaviour, None)
+        if self._book.pop(behaviour, None) is not None:
+            self._names = None
 
     @property
     def behaviours(self) -> tuple[str, ...]:
@@ -211,10 +215,13 @@ class VoteArbiter:
         stale_names = [b for b, e in self._book.items() if now - e.received > limit]
         for name in stale_names:
             del self._book[name]
+            self._names = None
         entries = list(self._book.values())
-        fresh = tuple(sorted(self._book))
-        stale = tuple(sorted(self._seen - self._book.keys()))
-        unknown = tuple(sorted(e.vote.behaviour for e in entries if not e.known))
+        if self._names is None:  # membership changed: recompute the display names
+            self._names = (tuple(sorted(self._book)),
+                           tuple(sorted(self._seen - self._book.keys())),
+                           tuple(sorted(e.vote.behaviour for e in entries if not e.known)))
+        fresh, stale, unknown = self._names
         if not entries:
             return self._stop(now, self._zeros, self._no_veto, fresh, stale, unknown,
                               "no-fresh-vote")
