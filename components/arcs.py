@@ -206,7 +206,7 @@ class ArcSetParameters(Parameters):
 
 
 def _read_only(array: NDArray[Any]) -> NDArray[Any]:
-    array.flags.writeable = False
+    array.setflags(write=False)  # cheaper than array.flags.writeable = False
     return array
 
 

@@ -170,8 +170,9 @@ class SweepTables:
 
     ``cells[k]`` holds the flat indices (i·cols + j) of the cells arc k's discs touch,
     ordered by ``reach[k]``, the arc length (m) at which each is first touched; rows are
-    padded to a common length with the index ``rows·cols`` (one past the grid) and reach
-    inf. ``horizons[k]`` is the arc length S_k swept.
+    padded to a common length, with at least one pad entry each, with the index
+    ``rows·cols`` (one past the grid) and reach inf. ``horizons[k]`` is the arc length
+    S_k swept.
     """
 
     arcs: ArcSet
@@ -268,7 +269,7 @@ def build_sweep_tables(arcs: ArcSet, geometry: MapGeometry, *, radius: float, st
         by_reach = np.lexsort((unique, first_reach))
         per_arc.append((unique[by_reach].astype(np.intp), first_reach[by_reach]))
 
-    width = max(1, max(len(c) for c, _ in per_arc))
+    width = max(len(c) for c, _ in per_arc) + 1  # every row ends in a pad entry
     pad = geometry.rows * geometry.cols
     cells = np.full((len(arcs), width), pad, dtype=np.intp)
     reach_table = np.full((len(arcs), width), np.inf)
@@ -330,9 +331,18 @@ class ArcSweepScorer:
         self._norm = float(discounted_distance(reference, p.DistFactor, p.MinDistDiscount))
         self._reference = reference
         self._certainty_ones = np.ones(len(tables.arcs))
-        self._arange = np.arange(len(tables.arcs))
+        self._row_start = np.arange(len(tables.arcs)) * tables.cells.shape[1]
+        self._reach_flat = self._reach.reshape(-1)
         self._discounted = p.DistFactor > 0.0 and p.MinDistDiscount < 1.0
         self._max_speed = np.full(len(tables.arcs), p.MaxVelocity)
+
+    def _first(self, mask: NDArray[np.bool_]) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+        """Per row: whether ``mask`` has a True, and the reach of the first (inf if none)."""
+        flat = mask.argmax(axis=1) + self._row_start
+        found = mask.reshape(-1).take(flat)
+        distance = self._reach_flat.take(flat)
+        distance[~found] = np.inf
+        return found, distance
 
     def score(self, hazard: NDArray[Any], goodness: NDArray[Any]) -> SweepScores:
         """Score every arc on one map's ``hazard`` (0..1, NaN unknown) and ``goodness``
@@ -348,7 +358,6 @@ class ArcSweepScorer:
         self._goodness[:-1] = goodness.reshape(-1)
         cells = self.tables.cells
         reach = self._reach
-        arange = self._arange
         h = self._hazard.take(cells)
         obstacle = h >= self.hazard_threshold  # NaN compares False
         if p.VetoUnknownCells or p.CostUnknownCells:
@@ -359,22 +368,18 @@ class ArcSweepScorer:
         else:
             blocked = obstacle
         # Each table row is sorted by reach: the first True is the nearest.
-        first = obstacle.argmax(axis=1)
-        hit = obstacle[arange, first]
-        obstacle_distance = np.where(hit, reach[arange, first], np.inf)
+        hit, obstacle_distance = self._first(obstacle)
         if blocked is obstacle:
             free = np.minimum(obstacle_distance, self._horizons)
         else:
-            first = blocked.argmax(axis=1)
-            free = np.where(blocked[arange, first], reach[arange, first], np.inf)
-            np.minimum(free, self._horizons, out=free)
+            free = np.minimum(self._first(blocked)[1], self._horizons)
         # fmax skips NaN: an unknown cell (not an obstacle here) adds no roughness. The
         # pad cells have hazard 0, so without a discount the weights need no multiply.
         passed = reach < free[:, None]
         weighted = h * self._weight if self._discounted else h
         rough = np.fmax.reduce(weighted * passed, axis=1, initial=0.0)
         used = reach <= free[:, None]
-        n_used = np.count_nonzero(used, axis=1)
+        n_used = used.argmin(axis=1)  # a prefix, and every row ends in an inf pad
         # Means of values in 0..1 stay in 0..1 in floating point (rounding is monotonic).
         certainty = np.add.reduce(self._goodness.take(cells) * used, axis=1)
         certainty /= np.maximum(n_used, 1)
