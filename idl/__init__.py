@@ -50,8 +50,10 @@ from idl.maps import (
 )
 from idl.planning import (
     IMPASSABLE,
+    ArcDecisionIDL,
     ArcVoteIDL,
     Cost,
+    PlannedPathIDL,
     PlanningBoundaryIDL,
     PlanPointIDL,
     WaypointGroupIDL,
@@ -85,7 +87,7 @@ __all__ = [
     "TravMapArrayEventIDL", "EtravMapArrayEventIDL", "PlanMapEventIDL",
     # planning
     "PlanPointIDL", "PlanningBoundaryIDL", "WaypointIDL", "WaypointGroupIDL",
-    "ArcVoteIDL", "IMPASSABLE", "Cost",
+    "ArcVoteIDL", "ArcDecisionIDL", "PlannedPathIDL", "IMPASSABLE", "Cost",
     # vehicle
     "VelocityIDL", "VelocityDataIDL", "MinMaxVelocityIDL",
     # interfaces

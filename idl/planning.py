@@ -24,6 +24,8 @@ __all__ = [
     "WaypointIDL",
     "WaypointGroupIDL",
     "ArcVoteIDL",
+    "ArcDecisionIDL",
+    "PlannedPathIDL",
     "IMPASSABLE",
     "Cost",
 ]
@@ -166,3 +168,84 @@ class ArcVoteIDL(_Struct):
     def all_vetoed(self) -> bool:
         """True if every arc is vetoed (a halt), or there are no arcs."""
         return bool(np.all(self.veto))
+
+
+class ArcDecisionIDL(_Struct):
+    """The Arc Arbiter's decision, published for displays as event ``ArcDecision``.
+
+    The seed's arbiter publishes nothing (Table 25); afa's publishes one of these per
+    decision so that the console's local map (the seed's LocalMap "with arcs") and logs
+    can show *why* the vehicle went where it went. Element k of the arrays refers to the
+    arc of curvature ``curvatures[k]`` (the arc set of the votes, left positive).
+
+    ``scores[k]`` is the combined weighted score Σ weight·certainty·vote over the fresh
+    votes (computed for vetoed arcs too, for display); ``vetoed[k]`` the union of the
+    fresh vetoes. ``index`` is the chosen arc (-1 when there was no arc set to choose
+    from); on a fail-safe it is the straight arc and ``failsafe`` names the cause
+    (``no-fresh-vote``, ``missing-required``, ``all-vetoed``, ``no-valid-vote``; empty
+    otherwise). ``fresh`` lists the behaviours whose votes counted, ``stale`` those seen
+    before whose latest vote went stale, ``unknown`` fresh behaviours without a weight.
+    """
+
+    time: TimeIDL = field(unit="", description="time of the decision")
+    curvatures: Annotated[np.ndarray, Array("float64", (None,))] = field(
+        unit="1/m", description="(n,) the candidate arcs' curvatures, left positive")
+    scores: Annotated[np.ndarray, Array("float64", (None,))] = field(
+        unit="1", description="(n,) combined weighted score of each arc (vetoed included)")
+    vetoed: Annotated[np.ndarray, Array("bool", (None,))] = field(
+        unit="", description="(n,) true where a fresh vote vetoes the arc")
+    index: int = field(-1, unit="1", ge=-1, description="the chosen arc; -1 if none")
+    curvature: float = field(0.0, unit="1/m", allow_inf_nan=False,
+                             description="the chosen arc's curvature, left positive")
+    steeringAngle: float = field(0.0, unit="rad", allow_inf_nan=False,
+                                 description="the steering angle commanded, left positive")
+    speed: float = field(0.0, unit="m/s", ge=0.0, allow_inf_nan=False,
+                         description="the speed commanded (0: stop)")
+    fresh: tuple[str, ...] = field((), unit="", description="behaviours whose votes counted")
+    stale: tuple[str, ...] = field((), unit="", description="behaviours whose latest vote "
+                                                            "went stale")
+    unknown: tuple[str, ...] = field((), unit="", description="fresh behaviours without a "
+                                                              "configured weight")
+    failsafe: str = field("", unit="", description="fail-safe cause, empty if none")
+
+    @model_validator(mode="after")
+    def _check(self) -> ArcDecisionIDL:
+        n = self.curvatures.shape[0]
+        for name in ("scores", "vetoed"):
+            if getattr(self, name).shape[0] != n:
+                raise ValueError(f"{name} has {getattr(self, name).shape[0]} entries, "
+                                 f"curvatures has {n}")
+        if not np.all(np.isfinite(self.curvatures)) or not np.all(np.isfinite(self.scores)):
+            raise ValueError("curvatures and scores must be finite")
+        if self.index >= n:
+            raise ValueError(f"index {self.index} is outside the {n} arcs")
+        return self
+
+
+_PathPoints = Annotated[np.ndarray, Array("float64", (None, 2))]
+
+
+class PlannedPathIDL(_Struct):
+    """FindPath's planned path, published for displays as event ``PlannedPath``.
+
+    ``points`` are the path's cells from the vehicle to the goal, as world-frame (x east,
+    y north) metres from ``initialUTM`` (the frame of ``Pose`` and of the global maps).
+    An empty path means no path was found (FindPath then vetoes every arc).
+    """
+
+    time: TimeIDL = field(unit="", description="time of the plan")
+    points: _PathPoints = field(unit="m", description="(n, 2) world x (east), y (north) "
+                                                      "from the vehicle to the goal")
+    initialUTM: Annotated[np.ndarray, Array("float64", (3,))] = field(
+        unit="m", description="UTM (easting, northing, elevation) of the world frame's "
+                              "origin")
+    cost: float = field(0.0, unit="1", ge=0.0, allow_inf_nan=True,
+                        description="the path's cost (cell costs times step lengths); inf "
+                                    "if none")
+    goal: WaypointIDL | None = field(None, unit="", description="the waypoint planned to")
+
+    @model_validator(mode="after")
+    def _check(self) -> PlannedPathIDL:
+        if not np.all(np.isfinite(self.points)) or not np.all(np.isfinite(self.initialUTM)):
+            raise ValueError("points and initialUTM must be finite")
+        return self

@@ -17,6 +17,7 @@ from pydantic import TypeAdapter
 
 import idl
 from idl import (
+    ArcDecisionIDL,
     ArcVoteIDL,
     EgoMapArrayEventIDL,
     EgoMapSeqEventIDL,
@@ -29,6 +30,7 @@ from idl import (
     MapSeqEventIDL,
     MinMaxVelocityIDL,
     PlanMapEventIDL,
+    PlannedPathIDL,
     PlanningBoundaryIDL,
     PlanPointIDL,
     PoseTransformIDL,
@@ -159,6 +161,14 @@ SAMPLES: dict[str, Callable[[], IDLModel]] = {
         time=T0, behaviour="PurePursuit", curvatures=np.array([-0.25, 0.0, 0.25]),
         veto=np.array([True, False, False]), vote=np.array([0.0, 1.0, 0.5]),
         certainty=np.array([1.0, 0.75, 0.25]), maxSpeed=np.array([0.0, 2.0, 1.5])),
+    "ArcDecisionIDL": lambda: ArcDecisionIDL(
+        time=T0, curvatures=np.array([0.25, 0.0, -0.25]), scores=np.array([0.5, 1.75, 0.0]),
+        vetoed=np.array([False, False, True]), index=1, curvature=0.0, steeringAngle=0.0,
+        speed=0.5, fresh=("ObstacleAvoidance", "PurePursuit"), stale=("FindPath",)),
+    "PlannedPathIDL": lambda: PlannedPathIDL(
+        time=T0, points=np.array([[0.0, 0.0], [0.5, 0.5], [1.0, 1.5]]),
+        initialUTM=np.array([512_345.25, 5_543_210.5, 750.125]), cost=2.5,
+        goal=WaypointIDL(latitude=50.25, longitude=-111.125)),
     "VelocityIDL": lambda: VelocityIDL(translation=1.25, rotation=-0.3, steeringAngle=-0.35),
     "VelocityDataIDL": lambda: VelocityDataIDL(
         time=T0, velocity=VelocityIDL(translation=1.0, rotation=0.1, steeringAngle=0.2),
@@ -360,6 +370,13 @@ def test_unknown_field_is_refused():
                        vote=np.zeros(3), certainty=np.zeros(3), maxSpeed=np.zeros(3)),
     lambda: ArcVoteIDL(time=T0, behaviour="b", curvatures=np.zeros(1), veto=np.zeros(1),
                        vote=np.array([1.5]), certainty=np.zeros(1), maxSpeed=np.zeros(1)),
+    lambda: ArcDecisionIDL(time=T0, curvatures=np.zeros(3), scores=np.zeros(2),
+                           vetoed=np.zeros(3, dtype=bool)),                # lengths differ
+    lambda: ArcDecisionIDL(time=T0, curvatures=np.zeros(2), scores=np.zeros(2),
+                           vetoed=np.zeros(2, dtype=bool), index=2),       # no arc 2
+    lambda: ArcDecisionIDL(time=T0, curvatures=np.zeros(1), scores=np.array([NAN]),
+                           vetoed=np.zeros(1, dtype=bool)),
+    lambda: PlannedPathIDL(time=T0, points=np.array([[0.0, NAN]]), initialUTM=np.zeros(3)),
     lambda: GpsIDL(time=T0, utmZoneLetter="I"),
     lambda: GpsIDL(time=T0, latitude=91.0),
     lambda: GpsIDL(time=T0, track=360.0),
