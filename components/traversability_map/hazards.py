@@ -1,0 +1,566 @@
+"""The Traversability Map's numerical core: terrain grid → hazard and goodness grids.
+Pure numpy: no asyncio, no afa.
+
+Pipeline (all vectorised over the whole grid; a per-cell Python reference lives in the
+tests):
+
+1. **Resample** the fine terrain grid (0.2 m) onto the coarse traversability grid
+   (0.5 m). The ratio need not be an integer: each fine cell belongs to the coarse
+   cell containing its *centre* (floor semantics, so every fine cell goes to exactly
+   one coarse cell; at 0.2 → 0.5 m a coarse cell gets 2 or 3 fine cells per axis).
+   Per coarse cell: points ``n`` = Σ counts, ``elevation`` = count-weighted mean (the
+   mean of all its points), ``min``/``max`` of the fine minima/maxima, ``last_seen`` =
+   newest fine time, and the count-weighted *centroid* of the fine cell centres. The
+   centroid is where the mean elevation actually sits; the slope fit uses it, so the
+   uneven 2-or-3 grouping does not bias slopes (up to 10 % at 0.2/0.5 otherwise).
+2. **Step hazard** of a known cell: ``step = max(max - min, max over known 8-neighbours
+   |elevation_n - elevation|)``. The within-cell spread catches a wall inside the
+   cell; neighbour differences use mean elevations (not max - min across cells,
+   which would read a traversable 19° ramp as a 0.3 m step over a diagonal). With
+   ``StepPercent`` 0 the hazard is binary, 1 when ``step >= T``; with ``StepPercent``
+   1 it is graded, ``min(1, step / T)``: the step "as a percentage" of ``Stepheight``
+   (which stays in millimetres).
+3. **Slope hazard**: a least-squares plane ``z = a·x + b·y + c`` through the known
+   cells of the 3×3 neighbourhood (at their centroids), which must hold at least three
+   cells not (nearly) on one line (the normal equations' determinant in cell units ≥
+   0.25); angle = atan(√(a² + b²)); hazard ``min(1, angle / limit)``, graded so that
+   the planner's cost rises with slope. Cells without a fit get no slope hazard.
+4. **Far field** (distance from the cell centre to the vehicle position > ``Farfield``):
+   the thresholds are *relaxed*: ``T·Farfieldscale`` and the slope limit
+   ``Maxslope·Farfieldslopescale`` (capped at 89.9°). Far data is less accurate
+   (grazing incidence, range noise, and orientation error growing with range:
+   2° at 8 m is 0.28 m of height), so its spurious step and slope readings must not
+   become phantom obstacles; a real obstacle is re-judged with near-field accuracy as
+   the vehicle closes in, well before stopping distance. (A scale below 1 tightens.)
+5. **Negative obstacles** (with ``StepOn``), over straight lines of up to
+   ``r = ceil(hole_reach / g)`` cells either side of a cell along the four axes
+   (x, y and both diagonals). Heights are compared after removing what a slope could
+   explain over the horizontal distance ``d_k`` to cell ``k``:
+
+   - *Sunken cell* (known): along some axis both sides have known cells and
+     ``min(H+, H-) - elevation >= T``, with ``H = max_k (elevation_k - s·d_k)`` over a
+     side and ``s = tan(slope limit)``: ground far below its neighbours on both sides,
+     even allowing for the steepest legal slope (a ditch bottom wider than one cell,
+     where the 8-neighbour step sees only bottom). On any plane no steeper than the
+     limit, ``H <= elevation``, so it never fires on legal slopes.
+   - *Hole* (unknown cell): along some axis both sides have known cells and
+     ``max(H+, H-) - min(L+, L-) >= T`` with ``H = max_k (elevation_k - t·d_k)``,
+     ``L = min_k (min_k + t·d_k)`` and the *trend* ``t`` = the flatter of the fitted
+     slopes (tan) of the nearest known cell on each side (at most the limit's): a gap
+     in the data across which the ground drops by a step more than the surrounding
+     terrain's own gradient explains. Worst-case compensation would not do here:
+     the grazing laser sees only the upper part of a ditch's far wall (0.5 m of a
+     1 m ditch at 8 m), 2 m from the lip, which a 20° ramp could "explain"; but an
+     unseen 14° down-ramp between two level stretches is not what level ground looks
+     like. The cell becomes hazard 1 with goodness ``inferred_goodness ×`` the best
+     goodness of the cells that bound it. Unknown cells without such evidence stay
+     NaN.
+   - Known limitations: a hole directly behind a positive obstacle taller than ``T``
+     also reads as a drop (the obstacle's top against the ground beyond its shadow)
+     and is marked, against an obstacle that is impassable anyway; the unseen back
+     of a crest falling away at more than the near side's slope over several metres
+     is marked too.
+6. **Goodness** ``= (1 - exp(-n / goodness_points)) · exp(-age / goodness_time) · a``:
+   how much data (n points), how recent (age = now - last seen; 1 if unknown), and how
+   accurate (``a = min(1, 1 / Farfieldscale)`` in the far field, else 1). Unknown
+   cells have goodness 0. The Global Map compares goodness to decide which
+   observation of a cell to keep.
+
+Hazard: the maximum of the enabled rules, in 0..1 (0 easy, 1 untraversable), NaN =
+unknown; unknown cells are never free.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from components.terrain_map.grid import GridGeometry, TerrainLayers
+
+__all__ = [
+    "HazardRules",
+    "CoarseCells",
+    "TraversabilityLayers",
+    "TraversabilityMapper",
+    "LastSeenTracker",
+    "resample",
+    "compute_hazards",
+    "FLAG_STEP",
+    "FLAG_SLOPE",
+    "FLAG_SUNKEN",
+    "FLAG_HOLE",
+    "FLAG_FAR",
+    "AXES",
+    "MIN_PLANE_DETERMINANT",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Flag bits in :attr:`TraversabilityLayers.flags`: which rule reached hazard 1.
+FLAG_STEP = 1
+FLAG_SLOPE = 2
+FLAG_SUNKEN = 4
+FLAG_HOLE = 8
+#: The cell lies in the far field (thresholds relaxed).
+FLAG_FAR = 16
+
+#: The four line directions of the negative-obstacle rules, in cells (di, dj).
+AXES = ((1, 0), (0, 1), (1, 1), (1, -1))
+
+#: Smallest determinant (cell units) of the plane fit's normal equations: rejects
+#: fewer than three cells and three nearly collinear ones.
+MIN_PLANE_DETERMINANT = 0.25
+
+
+class _TraverseParameters(Protocol):
+    StepOn: int
+    SlopeOn: int
+    StepPercent: int
+    Stepheight: float
+    Maxslope: float
+    Farfield: float
+    Farfieldscale: float
+    Farfieldslopescale: float
+
+
+@dataclass(frozen=True)
+class HazardRules:
+    """Hazard settings in SI units (metres, degrees, seconds).
+
+    The first eight mirror Table A.7 (``from_parameters`` converts millimetres); the
+    rest are afa additions the seed does not name:
+
+    - ``hole_reach``: how far (m) the negative-obstacle rules look either side of a
+      cell: the widest ditch whose unseen middle is still marked;
+    - ``goodness_points``: points for goodness 0.63 from quantity (1 - 1/e);
+    - ``goodness_time``: seconds for data to age to 1/e (pose drift makes old data
+      less accurate);
+    - ``inferred_goodness``: goodness factor of a hole marked from its surroundings;
+    - ``min_points``: cells with fewer points count as unknown.
+
+    Raises ValueError for values outside their ranges.
+    """
+
+    step_on: bool = True
+    slope_on: bool = True
+    step_percent: bool = False
+    step_height: float = 0.3
+    max_slope: float = 20.0
+    far_field: float = 8.0
+    far_field_scale: float = 1.5
+    far_field_slope_scale: float = 1.5
+    hole_reach: float = 2.0
+    goodness_points: float = 5.0
+    goodness_time: float = 30.0
+    inferred_goodness: float = 0.5
+    min_points: int = 1
+
+    def __post_init__(self) -> None:
+        positive = ("step_height", "far_field_scale", "far_field_slope_scale",
+                    "goodness_points", "goodness_time")
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ValueError(f"HazardRules.{name} must be > 0")
+        if not 0 < self.max_slope < 90:
+            raise ValueError("HazardRules.max_slope must lie in (0, 90) degrees")
+        if not (self.far_field >= 0 and self.hole_reach >= 0):
+            raise ValueError("HazardRules.far_field and hole_reach must be >= 0")
+        if not 0 <= self.inferred_goodness <= 1:
+            raise ValueError("HazardRules.inferred_goodness must lie in 0..1")
+        if self.min_points < 1:
+            raise ValueError("HazardRules.min_points must be >= 1")
+
+    @classmethod
+    def from_parameters(cls, parameters: _TraverseParameters, **extra: Any) -> HazardRules:
+        """From Table A.7 parameters (e.g. a ``TraversabilityMapParameters``); ``extra``
+        sets the afa additions."""
+        return cls(step_on=bool(parameters.StepOn), slope_on=bool(parameters.SlopeOn),
+                   step_percent=bool(parameters.StepPercent),
+                   step_height=parameters.Stepheight / 1000.0,
+                   max_slope=parameters.Maxslope, far_field=parameters.Farfield / 1000.0,
+                   far_field_scale=parameters.Farfieldscale,
+                   far_field_slope_scale=parameters.Farfieldslopescale, **extra)
+
+    @property
+    def far_slope(self) -> float:
+        """The far-field slope limit (deg)."""
+        return min(self.max_slope * self.far_field_slope_scale, 89.9)
+
+    @property
+    def far_accuracy(self) -> float:
+        """Goodness factor of far-field data."""
+        return min(1.0, 1.0 / self.far_field_scale)
+
+
+# --- resampling ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CoarseCells:
+    """A terrain grid resampled onto the traversability grid (see the module doc).
+
+    ``count`` is int64; ``elevation``, ``min_height``, ``max_height`` are float64, NaN
+    where ``count`` is 0; ``last_seen`` NaN where unknown; ``offset_x``/``offset_y``
+    are the centroid's offset (m) from the cell's nominal centre (0 where unknown).
+    """
+
+    geometry: GridGeometry
+    count: NDArray[np.int64]
+    elevation: FloatArray
+    min_height: FloatArray
+    max_height: FloatArray
+    last_seen: FloatArray
+    offset_x: FloatArray
+    offset_y: FloatArray
+
+
+class _Resampler:
+    """Fine-to-coarse cell assignment for one pair of geometries (reused while they
+    stay put)."""
+
+    def __init__(self, fine: GridGeometry, coarse: GridGeometry) -> None:
+        x, y = fine.centres()
+        ci = np.floor((x - coarse.origin_x) / coarse.gridsize).ravel()
+        cj = np.floor((y - coarse.origin_y) / coarse.gridsize).ravel()
+        inside = (ci >= 0) & (ci < coarse.rows) & (cj >= 0) & (cj < coarse.cols)
+        self.fine_index = np.flatnonzero(inside)
+        i, j = ci[inside].astype(np.intp), cj[inside].astype(np.intp)
+        self.coarse_index = i * coarse.cols + j
+        cx, cy = coarse.cell_center(i, j)
+        self.dx = x.ravel()[inside] - cx
+        self.dy = y.ravel()[inside] - cy
+        self.coarse = coarse
+
+    def __call__(self, terrain: TerrainLayers) -> CoarseCells:
+        geo = self.coarse
+        n = geo.size
+        count = terrain.count.ravel().take(self.fine_index).astype(np.int64)
+        known = count > 0
+        idx = self.coarse_index[known]
+        w = count[known].astype(np.float64)
+        elev = terrain.elevation.ravel().take(self.fine_index)[known].astype(np.float64)
+        total = np.bincount(idx, weights=w, minlength=n)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            elevation = np.bincount(idx, weights=w * elev, minlength=n) / total
+            offset_x = np.bincount(idx, weights=w * self.dx[known], minlength=n) / total
+            offset_y = np.bincount(idx, weights=w * self.dy[known], minlength=n) / total
+        low = np.full(n, np.inf)
+        np.minimum.at(low, idx, terrain.min_height.ravel().take(self.fine_index)[known])
+        high = np.full(n, -np.inf)
+        np.maximum.at(high, idx, terrain.max_height.ravel().take(self.fine_index)[known])
+        seen = np.full(n, -np.inf)
+        if terrain.last_seen is not None:
+            fine_seen = terrain.last_seen.ravel().take(self.fine_index)[known]
+            np.maximum.at(seen, idx, np.where(np.isnan(fine_seen), -np.inf, fine_seen))
+        points = total.astype(np.int64)
+        empty = points == 0
+        for array in (elevation, low, high):
+            array[empty] = np.nan
+        offset_x[empty] = 0.0
+        offset_y[empty] = 0.0
+        seen[~np.isfinite(seen)] = np.nan
+        shape = geo.shape
+        return CoarseCells(geo, points.reshape(shape), elevation.reshape(shape),
+                           low.reshape(shape), high.reshape(shape), seen.reshape(shape),
+                           offset_x.reshape(shape), offset_y.reshape(shape))
+
+
+def resample(terrain: TerrainLayers, coarse: GridGeometry) -> CoarseCells:
+    """Resample ``terrain`` (any cell size) onto ``coarse`` (same map frame)."""
+    return _Resampler(terrain.geometry, coarse)(terrain)
+
+
+# --- hazards ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TraversabilityLayers:
+    """The traversability grid and what it was made from.
+
+    ``hazard`` float32 0..1, NaN = unknown; ``goodness`` float32 0..1 (0 where
+    unknown); ``step`` (m) and ``slope`` (deg) float32, NaN where not measured;
+    ``flags`` uint8 of ``FLAG_*`` bits; ``count`` int32 points behind each cell.
+    """
+
+    geometry: GridGeometry
+    hazard: NDArray[np.float32]
+    goodness: NDArray[np.float32]
+    step: NDArray[np.float32]
+    slope: NDArray[np.float32]
+    flags: NDArray[np.uint8]
+    count: NDArray[np.int32]
+
+
+def _padded(values: FloatArray, pad: int, fill: float) -> FloatArray:
+    out = np.full((values.shape[0] + 2 * pad, values.shape[1] + 2 * pad), fill)
+    out[pad:pad + values.shape[0], pad:pad + values.shape[1]] = values
+    return out
+
+
+def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[float, float],
+                    now: float) -> TraversabilityLayers:
+    """Hazard and goodness of every cell of ``cells`` (see the module doc).
+
+    ``vehicle_xy`` is the vehicle position in the map frame (for the far field), ``now``
+    the map time (s, for goodness). Raises ValueError for a non-finite position.
+    """
+    if not all(math.isfinite(v) for v in vehicle_xy):
+        raise ValueError("vehicle position must be finite")
+    geo = cells.geometry
+    rows, cols = geo.shape
+    g = geo.gridsize
+    known = cells.count >= rules.min_points
+    elev = np.where(known, cells.elevation, np.nan)
+    low = np.where(known, cells.min_height, np.nan)
+    high = np.where(known, cells.max_height, np.nan)
+
+    cx, cy = geo.centres()
+    far = np.hypot(cx - vehicle_xy[0], cy - vehicle_xy[1]) > rules.far_field
+    threshold = np.where(far, rules.step_height * rules.far_field_scale, rules.step_height)
+    limit = np.where(far, rules.far_slope, rules.max_slope)
+    tan_limit = np.tan(np.radians(limit))
+
+    # --- step
+    pad = 1
+    pe = _padded(elev, pad, np.nan)
+    neighbour = np.zeros((rows, cols))
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di == 0 and dj == 0:
+                continue
+            shifted = pe[pad + di:pad + di + rows, pad + dj:pad + dj + cols]
+            np.fmax(neighbour, np.abs(shifted - elev), out=neighbour)  # fmax skips NaN
+    step = np.where(known, np.maximum(high - low, neighbour), np.nan)
+    with np.errstate(invalid="ignore"):
+        step_full = known & (step >= threshold)
+    if rules.step_percent:
+        step_hazard = np.minimum(step / threshold, 1.0)
+    else:
+        step_hazard = np.where(step_full, 1.0, 0.0)
+
+    # --- slope
+    slope = _plane_slopes(elev, cells.offset_x, cells.offset_y, g, known)
+    with np.errstate(invalid="ignore"):
+        slope_hazard = np.minimum(slope / limit, 1.0)
+        slope_full = slope >= limit
+
+    # --- negative obstacles
+    goodness = _goodness(cells, rules, known, far, now)
+    sunken = np.zeros((rows, cols), dtype=bool)
+    hole = np.zeros((rows, cols), dtype=bool)
+    hole_goodness = np.zeros((rows, cols))
+    reach = math.ceil(rules.hole_reach / g - 1e-9)
+    if rules.step_on and reach >= 1:
+        sunken, hole, hole_goodness = _negative_obstacles(
+            elev, low, goodness, known, slope, tan_limit, threshold, g, reach)
+
+    hazard = np.zeros((rows, cols))
+    if rules.step_on:
+        np.maximum(hazard, step_hazard, out=hazard, where=known)
+        hazard[sunken] = 1.0
+    if rules.slope_on:
+        np.fmax(hazard, slope_hazard, out=hazard, where=known)
+    hazard[~known] = np.nan
+    hazard[hole] = 1.0
+    goodness = np.where(hole, rules.inferred_goodness * hole_goodness, goodness)
+
+    flags = np.where(far, FLAG_FAR, 0).astype(np.uint8)
+    if rules.step_on:
+        flags |= np.where(step_full, FLAG_STEP, 0).astype(np.uint8)
+        flags |= np.where(sunken, FLAG_SUNKEN, 0).astype(np.uint8)
+        flags |= np.where(hole, FLAG_HOLE, 0).astype(np.uint8)
+    if rules.slope_on:
+        flags |= np.where(slope_full, FLAG_SLOPE, 0).astype(np.uint8)
+    return TraversabilityLayers(
+        geometry=geo, hazard=hazard.astype(np.float32), goodness=goodness.astype(np.float32),
+        step=step.astype(np.float32), slope=slope.astype(np.float32), flags=flags,
+        count=cells.count.astype(np.int32))
+
+
+def _goodness(cells: CoarseCells, rules: HazardRules, known: NDArray[np.bool_],
+              far: NDArray[np.bool_], now: float) -> FloatArray:
+    quantity = 1.0 - np.exp(-cells.count / rules.goodness_points)
+    age = np.where(np.isnan(cells.last_seen), 0.0, np.maximum(now - cells.last_seen, 0.0))
+    recency = np.exp(-age / rules.goodness_time)
+    accuracy = np.where(far, rules.far_accuracy, 1.0)
+    result: FloatArray = np.where(known, quantity * recency * accuracy, 0.0)
+    return result
+
+
+def _plane_slopes(elev: FloatArray, offset_x: FloatArray, offset_y: FloatArray, g: float,
+                  known: NDArray[np.bool_]) -> FloatArray:
+    """Slope angle (deg) of the least-squares plane through the known cells of each
+    known cell's 3x3 neighbourhood; NaN where unknown or degenerate."""
+    rows, cols = elev.shape
+    pe = _padded(elev, 1, np.nan)
+    px = _padded(offset_x / g, 1, 0.0)
+    py = _padded(offset_y / g, 1, 0.0)
+    sums = {name: np.zeros((rows, cols)) for name in
+            ("n", "x", "y", "xx", "xy", "yy", "z", "xz", "yz")}
+    centre = np.where(known, elev, 0.0)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            window = (slice(1 + di, 1 + di + rows), slice(1 + dj, 1 + dj + cols))
+            z = pe[window] - centre  # relative heights: better conditioned
+            w = ~np.isnan(z)
+            z = np.where(w, z, 0.0)
+            x = np.where(w, di + px[window], 0.0)  # positions in cells, centroid-corrected
+            y = np.where(w, dj + py[window], 0.0)
+            sums["n"] += w
+            sums["x"] += x
+            sums["y"] += y
+            sums["xx"] += x * x
+            sums["xy"] += x * y
+            sums["yy"] += y * y
+            sums["z"] += z
+            sums["xz"] += x * z
+            sums["yz"] += y * z
+    n, sx, sy = sums["n"], sums["x"], sums["y"]
+    sxx, sxy, syy = sums["xx"], sums["xy"], sums["yy"]
+    sz, sxz, syz = sums["z"], sums["xz"], sums["yz"]
+    # Cramer's rule on [[sxx sxy sx] [sxy syy sy] [sx sy n]] (a, b, c) = (sxz, syz, sz)
+    m00 = syy * n - sy * sy
+    m01 = sxy * n - sy * sx
+    m02 = sxy * sy - syy * sx
+    det = sxx * m00 - sxy * m01 + sx * m02
+    ok = known & (det >= MIN_PLANE_DETERMINANT)
+    safe = np.where(ok, det, 1.0)
+    a = (sxz * m00 - sxy * (syz * n - sy * sz) + sx * (syz * sy - syy * sz)) / safe
+    b = (sxx * (syz * n - sz * sy) - sxz * m01 + sx * (sxy * sz - syz * sx)) / safe
+    slope = np.degrees(np.arctan(np.hypot(a, b) / g))  # per cell → per metre
+    result: FloatArray = np.where(ok, slope, np.nan)
+    return result
+
+
+def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
+                        known: NDArray[np.bool_], slope: FloatArray, tan_limit: FloatArray,
+                        threshold: FloatArray, g: float, reach: int
+                        ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray]:
+    """Sunken known cells, holes (unknown cells across a drop) and each hole's best
+    bounding goodness; see the module doc."""
+    rows, cols = elev.shape
+    pe = _padded(elev, reach, np.nan)
+    pl = _padded(low, reach, np.nan)
+    pg = _padded(goodness, reach, 0.0)
+    pk = _padded(known.astype(np.float64), reach, 0.0) > 0
+    fitted = np.tan(np.radians(slope))
+    pt = _padded(np.where(np.isnan(fitted), np.inf, fitted), reach, np.inf)
+    unknown = ~known
+    sunken = np.zeros((rows, cols), dtype=bool)
+    hole = np.zeros((rows, cols), dtype=bool)
+    hole_goodness = np.zeros((rows, cols))
+    for di, dj in AXES:
+        unit = math.hypot(di, dj) * g
+        windows = [[(slice(reach + sign * k * di, reach + sign * k * di + rows),
+                     slice(reach + sign * k * dj, reach + sign * k * dj + cols))
+                    for k in range(1, reach + 1)] for sign in (1, -1)]
+        # the trend: the flatter fitted slope of the nearest known cell either side
+        trend = tan_limit.copy()
+        for side in windows:
+            nearest = np.full((rows, cols), np.inf)
+            found = np.zeros((rows, cols), dtype=bool)
+            for window in side:
+                new = pk[window] & ~found
+                nearest[new] = pt[window][new]
+                found |= new
+            np.minimum(trend, nearest, out=trend)
+        sides = []
+        for side in windows:
+            h_limit = np.full((rows, cols), -np.inf)  # ramps at the slope limit: sunken
+            h_trend = np.full((rows, cols), -np.inf)  # ramps at the trend: holes
+            l_trend = np.full((rows, cols), np.inf)
+            best = np.zeros((rows, cols))
+            for k, window in enumerate(side, start=1):
+                e = pe[window]
+                np.fmax(h_limit, e - tan_limit * (k * unit), out=h_limit)  # NaN skipped
+                np.fmax(h_trend, e - trend * (k * unit), out=h_trend)
+                np.fmin(l_trend, pl[window] + trend * (k * unit), out=l_trend)
+                np.maximum(best, pg[window], out=best)
+            sides.append((h_limit, h_trend, l_trend, best))
+        (hl1, ht1, l1, g1), (hl2, ht2, l2, g2) = sides
+        both = np.isfinite(hl1) & np.isfinite(hl2)
+        with np.errstate(invalid="ignore"):
+            sunken |= known & both & (np.minimum(hl1, hl2) - elev >= threshold)
+            drop = unknown & both & (np.maximum(ht1, ht2) - np.minimum(l1, l2) >= threshold)
+        hole |= drop
+        np.maximum(hole_goodness, np.where(drop, np.maximum(g1, g2), 0.0), out=hole_goodness)
+    return sunken, hole, hole_goodness
+
+
+class TraversabilityMapper:
+    """Turns terrain layers into traversability layers, reusing the fine-to-coarse
+    assignment while the two grids stay put (it is rebuilt when either moves)."""
+
+    def __init__(self, rules: HazardRules) -> None:
+        self.rules = rules
+        self._resampler: _Resampler | None = None
+        self._key: tuple[GridGeometry, GridGeometry] | None = None
+
+    def resample(self, terrain: TerrainLayers, geometry: GridGeometry) -> CoarseCells:
+        """:func:`resample`, cached per pair of geometries."""
+        key = (terrain.geometry, geometry)
+        if self._resampler is None or key != self._key:
+            self._resampler = _Resampler(terrain.geometry, geometry)
+            self._key = key
+        return self._resampler(terrain)
+
+    def update(self, terrain: TerrainLayers, geometry: GridGeometry,
+               vehicle_xy: tuple[float, float], now: float) -> TraversabilityLayers:
+        """The traversability grid ``geometry`` (same map frame as ``terrain``) with
+        the vehicle at ``vehicle_xy`` at time ``now``."""
+        return compute_hazards(self.resample(terrain, geometry), self.rules, vehicle_xy, now)
+
+
+class LastSeenTracker:
+    """Per-cell "last seen" times for terrain maps that carry none.
+
+    The IDL's terrain events hold point counts but no times; a cell whose count
+    changed since the previous event (after aligning a whole-cell scroll) and is
+    non-zero was seen at the new event's time. Cells present in the first event, or
+    scrolled in, are taken as seen at that event's time (their true age is unknown).
+    """
+
+    def __init__(self) -> None:
+        self._geometry: GridGeometry | None = None
+        self._count: NDArray[np.int64] | None = None
+        self._seen: FloatArray | None = None
+
+    def update(self, geometry: GridGeometry, count: NDArray[Any], time: float) -> FloatArray:
+        """The last-seen times (rows, cols) after an event of ``count`` at ``time``; NaN
+        where the count is 0."""
+        count = np.asarray(count, dtype=np.int64)
+        previous = self._aligned_previous(geometry)
+        if previous is None:
+            seen = np.where(count > 0, time, np.nan)
+        else:
+            old_count, old_seen = previous
+            changed = (count != old_count) | np.isnan(old_seen)
+            seen = np.where(count > 0, np.where(changed, time, old_seen), np.nan)
+        self._geometry, self._count, self._seen = geometry, count.copy(), seen
+        return seen.copy()
+
+    def _aligned_previous(self, geometry: GridGeometry
+                          ) -> tuple[NDArray[np.int64], FloatArray] | None:
+        old = self._geometry
+        if old is None or self._count is None or self._seen is None:
+            return None
+        if old.gridsize != geometry.gridsize or old.shape != geometry.shape:
+            return None
+        di = (geometry.origin_x - old.origin_x) / geometry.gridsize
+        dj = (geometry.origin_y - old.origin_y) / geometry.gridsize
+        si, sj = round(di), round(dj)
+        if abs(di - si) > 1e-6 or abs(dj - sj) > 1e-6:
+            return None
+        rows, cols = geometry.shape
+        count = np.zeros((rows, cols), dtype=np.int64)
+        seen = np.full((rows, cols), np.nan)
+        if abs(si) < rows and abs(sj) < cols:
+            dst = (slice(max(0, -si), rows - max(0, si)), slice(max(0, -sj), cols - max(0, sj)))
+            src = (slice(max(0, si), rows - max(0, -si)), slice(max(0, sj), cols - max(0, -sj)))
+            count[dst] = self._count[src]
+            seen[dst] = self._seen[src]
+        return count, seen
