@@ -34,32 +34,38 @@ tests):
    the vehicle closes in, well before stopping distance. (A scale below 1 tightens.)
 5. **Negative obstacles** (with ``StepOn``), over straight lines of up to
    ``r = ceil(hole_reach / g)`` cells either side of a cell along the four axes
-   (x, y and both diagonals). Heights are compared after removing what a slope could
-   explain over the horizontal distance ``d_k`` to cell ``k``:
+   (x, y and both diagonals); ``d_k`` is the distance to cell ``k`` on the line,
+   ``s = tan(slope limit)``:
 
    - *Sunken cell* (known): along some axis both sides have known cells and
-     ``min(H+, H-) - elevation >= T``, with ``H = max_k (elevation_k - s·d_k)`` over a
-     side and ``s = tan(slope limit)``: ground far below its neighbours on both sides,
-     even allowing for the steepest legal slope (a ditch bottom wider than one cell,
-     where the 8-neighbour step sees only bottom). On any plane no steeper than the
-     limit, ``H <= elevation``, so it never fires on legal slopes.
-   - *Hole* (unknown cell): along some axis both sides have known cells and
-     ``max(H+, H-) - min(L+, L-) >= T`` with ``H = max_k (elevation_k - t·d_k)``,
-     ``L = min_k (min_k + t·d_k)`` and the *trend* ``t`` = the flatter of the fitted
-     slopes (tan) of the nearest known cell on each side (at most the limit's): a gap
-     in the data across which the ground drops by a step more than the surrounding
-     terrain's own gradient explains. Worst-case compensation would not do here:
-     the grazing laser sees only the upper part of a ditch's far wall (0.5 m of a
-     1 m ditch at 8 m), 2 m from the lip, which a 20° ramp could "explain"; but an
-     unseen 14° down-ramp between two level stretches is not what level ground looks
-     like. The cell becomes hazard 1 with goodness ``inferred_goodness ×`` the best
-     goodness of the cells that bound it. Unknown cells without such evidence stay
-     NaN.
-   - Known limitations: a hole directly behind a positive obstacle taller than ``T``
-     also reads as a drop (the obstacle's top against the ground beyond its shadow)
-     and is marked, against an obstacle that is impassable anyway; the unseen back
-     of a crest falling away at more than the near side's slope over several metres
-     is marked too.
+     ``min(H+, H-) - elevation >= T`` with ``H = max_k (elevation_k - s·d_k)`` per side:
+     ground a step below its banks on both sides even allowing the steepest legal
+     slope (a ditch bottom wider than one cell, where the 8-neighbour step sees only
+     bottom). On a plane no steeper than the limit ``H <= elevation``: it never fires
+     on legal slopes. (A cell between two banks a step higher within ``hole_reach``,
+     such as a narrow gap between two tall obstacles, is sunken too.)
+   - *Hole* (unknown cell): along some axis, let ``b±`` be the nearest known cell on
+     each side (both must exist), ``t`` the *trend*, the flatter of their fitted
+     slopes (tan, at most the limit's), ``bank = elevation(b) - t·d_b`` on each side
+     that holds no step cell (step >= T) within reach, and ``L = min_k (min_k + t·d_k)``
+     the deepest evidence on either side. The cell is a hole when
+     ``max(bank+, bank-) - L >= T``: a gap in the data with level ground on one side
+     and a point a step lower across it than the terrain's own gradient explains.
+     This catches a ditch seen from afar (the grazing laser sees only the upper part
+     of its far wall, 0.5 m of a 1 m ditch at 8 m) and the unseen foot of a
+     down-ledge. Why the trend and not the slope limit: a 20° ramp could "explain"
+     0.5 m over the 2 m to that far wall, but level ground on both sides does not
+     unseeingly dip 14°. Why a side with a step is no bank: the unseen shadow behind
+     a rock has the rock's top as its nearest cell, which would read as a drop to the
+     ground beyond; but that side also holds the rock's face (a step cell), while a
+     ditch's lip or a ledge's top is level ground back to the vehicle. The cell
+     becomes hazard 1 with goodness ``inferred_goodness ×`` the best goodness along its
+     lines. Unknown cells without such evidence stay NaN (unknown, never free).
+   - Known limitations: a shadow longer than ``hole_reach`` behind an obstacle whose
+     face lies beyond reach of the shadow's far end can still read as a hole (against
+     an obstacle that is impassable anyway); a ditch with a step (a rock, a kerb)
+     within reach of its lip on every line is not marked from that lip; a ditch
+     wider than ``2·hole_reach`` keeps an unknown middle, enclosed by its marked rim.
 6. **Goodness** ``= (1 - exp(-n / goodness_points)) · exp(-age / goodness_time) · a``:
    how much data (n points), how recent (age = now - last seen; 1 if unknown), and how
    accurate (``a = min(1, 1 / Farfieldscale)`` in the far field, else 1). Unknown
@@ -356,7 +362,7 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     reach = math.ceil(rules.hole_reach / g - 1e-9)
     if rules.step_on and reach >= 1:
         sunken, hole, hole_goodness = _negative_obstacles(
-            elev, low, goodness, known, slope, tan_limit, threshold, g, reach)
+            elev, low, goodness, known, step_full, slope, tan_limit, threshold, g, reach)
 
     hazard = np.zeros((rows, cols))
     if rules.step_on:
@@ -437,8 +443,9 @@ def _plane_slopes(elev: FloatArray, offset_x: FloatArray, offset_y: FloatArray, 
 
 
 def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
-                        known: NDArray[np.bool_], slope: FloatArray, tan_limit: FloatArray,
-                        threshold: FloatArray, g: float, reach: int
+                        known: NDArray[np.bool_], stepped: NDArray[np.bool_],
+                        slope: FloatArray, tan_limit: FloatArray, threshold: FloatArray,
+                        g: float, reach: int
                         ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray]:
     """Sunken known cells, holes (unknown cells across a drop) and each hole's best
     bounding goodness; see the module doc."""
@@ -447,6 +454,7 @@ def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
     pl = _padded(low, reach, np.nan)
     pg = _padded(goodness, reach, 0.0)
     pk = _padded(known.astype(np.float64), reach, 0.0) > 0
+    ps = _padded(stepped.astype(np.float64), reach, 0.0) > 0
     fitted = np.tan(np.radians(slope))
     pt = _padded(np.where(np.isnan(fitted), np.inf, fitted), reach, np.inf)
     unknown = ~known
@@ -455,39 +463,45 @@ def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
     hole_goodness = np.zeros((rows, cols))
     for di, dj in AXES:
         unit = math.hypot(di, dj) * g
-        windows = [[(slice(reach + sign * k * di, reach + sign * k * di + rows),
-                     slice(reach + sign * k * dj, reach + sign * k * dj + cols))
-                    for k in range(1, reach + 1)] for sign in (1, -1)]
-        # the trend: the flatter fitted slope of the nearest known cell either side
-        trend = tan_limit.copy()
-        for side in windows:
-            nearest = np.full((rows, cols), np.inf)
+        sides = [[(slice(reach + sign * k * di, reach + sign * k * di + rows),
+                   slice(reach + sign * k * dj, reach + sign * k * dj + cols))
+                  for k in range(1, reach + 1)] for sign in (1, -1)]
+        highs = []  # sunken: the highest bank a legal slope allows, per side
+        nearest = []  # holes: the nearest known cell per side, and whether it is level
+        for side in sides:
+            high = np.full((rows, cols), -np.inf)
             found = np.zeros((rows, cols), dtype=bool)
-            for window in side:
-                new = pk[window] & ~found
-                nearest[new] = pt[window][new]
-                found |= new
-            np.minimum(trend, nearest, out=trend)
-        sides = []
-        for side in windows:
-            h_limit = np.full((rows, cols), -np.inf)  # ramps at the slope limit: sunken
-            h_trend = np.full((rows, cols), -np.inf)  # ramps at the trend: holes
-            l_trend = np.full((rows, cols), np.inf)
-            best = np.zeros((rows, cols))
+            bank = np.full((rows, cols), np.nan)
+            distance = np.full((rows, cols), np.nan)
+            tan = np.full((rows, cols), np.inf)
+            faced = np.zeros((rows, cols), dtype=bool)
             for k, window in enumerate(side, start=1):
-                e = pe[window]
-                np.fmax(h_limit, e - tan_limit * (k * unit), out=h_limit)  # NaN skipped
-                np.fmax(h_trend, e - trend * (k * unit), out=h_trend)
-                np.fmin(l_trend, pl[window] + trend * (k * unit), out=l_trend)
-                np.maximum(best, pg[window], out=best)
-            sides.append((h_limit, h_trend, l_trend, best))
-        (hl1, ht1, l1, g1), (hl2, ht2, l2, g2) = sides
-        both = np.isfinite(hl1) & np.isfinite(hl2)
+                np.fmax(high, pe[window] - tan_limit * (k * unit), out=high)  # skips NaN
+                new = pk[window] & ~found
+                bank[new] = pe[window][new]
+                distance[new] = k * unit
+                tan[new] = pt[window][new]
+                found |= new
+                faced |= ps[window]
+            highs.append(high)
+            nearest.append((found, bank, distance, tan, faced))
+        both = np.isfinite(highs[0]) & np.isfinite(highs[1])
         with np.errstate(invalid="ignore"):
-            sunken |= known & both & (np.minimum(hl1, hl2) - elev >= threshold)
-            drop = unknown & both & (np.maximum(ht1, ht2) - np.minimum(l1, l2) >= threshold)
+            sunken |= known & both & (np.minimum(highs[0], highs[1]) - elev >= threshold)
+        (f1, b1, d1, t1, s1), (f2, b2, d2, t2, s2) = nearest
+        trend = np.minimum(np.minimum(t1, t2), tan_limit)
+        deepest = np.full((rows, cols), np.inf)
+        best = np.zeros((rows, cols))
+        for side in sides:
+            for k, window in enumerate(side, start=1):
+                np.fmin(deepest, pl[window] + trend * (k * unit), out=deepest)
+                np.maximum(best, pg[window], out=best)
+        bank1 = np.where(s1, -np.inf, b1 - trend * d1)  # a side with a face is no bank
+        bank2 = np.where(s2, -np.inf, b2 - trend * d2)
+        with np.errstate(invalid="ignore"):
+            drop = unknown & f1 & f2 & (np.fmax(bank1, bank2) - deepest >= threshold)
         hole |= drop
-        np.maximum(hole_goodness, np.where(drop, np.maximum(g1, g2), 0.0), out=hole_goodness)
+        np.maximum(hole_goodness, np.where(drop, best, 0.0), out=hole_goodness)
     return sunken, hole, hole_goodness
 
 

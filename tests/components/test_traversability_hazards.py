@@ -162,6 +162,27 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                 best = max(best, good[(ii, jj)])
         return best
 
+    stepped: set[tuple[int, int]] = set()  # known cells with step >= T
+    for i in range(rows):
+        for j in range(cols):
+            a = cell(i, j)
+            if a is None:
+                continue
+            e = elev(i, j)
+            spread = a[5] - a[4]
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    ii, jj = i + di, j + dj
+                    b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
+                    if b is not None:
+                        spread = max(spread, abs(b[1] / b[0] - e))
+            if spread >= params(i, j)[1]:
+                stepped.add((i, j))
+
+    def faced(i: int, j: int, di: int, dj: int, sign: int) -> bool:
+        return any((i + sign * k * di, j + sign * k * dj) in stepped
+                   for k in range(1, reach + 1))
+
     for i in range(rows):
         for j in range(cols):
             far, t, limit = params(i, j)
@@ -170,29 +191,29 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
             s = math.tan(math.radians(limit))
             sunken = hole = False
             hole_good = 0.0
-            if rules.step_on:
-                for di, dj in AXES:
-                    one, two = line(i, j, di, dj, 1), line(i, j, di, dj, -1)
-                    if not (one and two):
-                        continue
-                    if a is not None:
-                        h1 = max(b[1] / b[0] - s * d for d, b, _ in one)
-                        h2 = max(b[1] / b[0] - s * d for d, b, _ in two)
-                        if min(h1, h2) - elev(i, j) >= t:
-                            sunken = True
-                        continue
-                    trend = s
-                    for side in (one, two):
-                        nearest = side[0][2]
-                        if nearest in slopes:
-                            trend = min(trend, math.tan(math.radians(slopes[nearest])))
-                    both = one + two
-                    high = max(b[1] / b[0] - trend * d for d, b, _ in both)
-                    low = min(b[4] + trend * d for d, b, _ in both)
-                    if high - low >= t:
-                        hole = True
-                        hole_good = max(hole_good, side_goodness(i, j, di, dj, 1),
-                                        side_goodness(i, j, di, dj, -1))
+            for di, dj in AXES if rules.step_on else ():
+                one, two = line(i, j, di, dj, 1), line(i, j, di, dj, -1)
+                if not (one and two):
+                    continue
+                if a is not None:
+                    h1 = max(b[1] / b[0] - s * d for d, b, _ in one)
+                    h2 = max(b[1] / b[0] - s * d for d, b, _ in two)
+                    sunken |= min(h1, h2) - elev(i, j) >= t
+                    continue
+                trend = s
+                for side in (one, two):
+                    if side[0][2] in slopes:
+                        trend = min(trend, math.tan(math.radians(slopes[side[0][2]])))
+                high = -math.inf
+                for sign, side in ((1, one), (-1, two)):
+                    d, b, _ = side[0]
+                    if not faced(i, j, di, dj, sign):
+                        high = max(high, b[1] / b[0] - trend * d)
+                low = min(b[4] + trend * d for d, b, _ in one + two)
+                if high - low >= t:
+                    hole = True
+                    hole_good = max(hole_good, side_goodness(i, j, di, dj, 1),
+                                    side_goodness(i, j, di, dj, -1))
             if a is None:
                 if hole:
                     out["hazard"][i, j] = 1.0
@@ -342,6 +363,30 @@ def test_a_ditch_seen_from_afar_marks_its_unseen_middle() -> None:
     # open ground before the lip and beyond the far wall stays easy
     assert np.all(layers.hazard[rows_at(-4.0, ditch[0] - 0.5)] == 0.0)
     assert np.all(layers.hazard[rows_at(ditch[1] + 1.0, 8.0)] == 0.0)
+
+
+def test_the_unseen_foot_of_a_down_ledge_is_a_hole() -> None:
+    """Level ground to x = 5, then 1 m lower; the strip at the ledge's foot is unseen."""
+    x, _ = FINE.centres()
+    layers = check_against_reference(terrain_from(
+        lambda x, y: np.where(x > 5.0, -1.0, 0.0), known=~((x > 5.0) & (x < 6.6))))
+    assert flagged(layers, FLAG_HOLE)[rows_at(5.3, 6.4)].all()
+
+
+def test_the_unseen_shadow_behind_a_rock_is_not_a_hole() -> None:
+    """A 0.8 m rock 1 m deep at x = 4..5; the 1.6 m behind it are unseen."""
+    x, y = FINE.centres()
+    rock = (np.abs(y) < 1.0)
+
+    def height(xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
+        return np.where((xx > 4.0) & (xx < 5.0) & (np.abs(yy) < 1.0), 0.8, 0.0)
+
+    layers = check_against_reference(terrain_from(
+        height, known=~((x > 5.0) & (x < 6.6) & rock)))
+    shadow = layers.hazard[rows_at(5.3, 6.4), COARSE.cols // 2 - 1:COARSE.cols // 2 + 1]
+    assert np.isnan(shadow).all()  # unknown, neither free nor a hazard
+    assert not flagged(layers, FLAG_HOLE).any()
+    assert flagged(layers, FLAG_STEP)[rows_at(3.6, 5.0)].any()
 
 
 def test_a_hole_on_flat_ground_stays_unknown() -> None:
