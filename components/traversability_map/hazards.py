@@ -61,6 +61,10 @@ tests):
      ditch's lip or a ledge's top is level ground back to the vehicle. The cell
      becomes hazard 1 with goodness ``inferred_goodness ×`` the best goodness along its
      lines. Unknown cells without such evidence stay NaN (unknown, never free).
+   - *Hole rim*: a known cell next to a hole (8-neighbours) whose fine cells are
+     mostly (over half) without points joins the hole (hazard 1, goodness
+     ``inferred_goodness ×`` its own): it was seen only along an edge, like the lip
+     strip of a cell that lies mostly over the ditch beyond an invisible near wall.
    - Known limitations: a shadow longer than ``hole_reach`` behind an obstacle whose
      face lies beyond reach of the shadow's far end can still read as a hole (against
      an obstacle that is impassable anyway); a ditch with a step (a rock, a kerb)
@@ -211,7 +215,9 @@ class CoarseCells:
 
     ``count`` is int64; ``elevation``, ``min_height``, ``max_height`` are float64, NaN
     where ``count`` is 0; ``last_seen`` NaN where unknown; ``offset_x``/``offset_y``
-    are the centroid's offset (m) from the cell's nominal centre (0 where unknown).
+    are the centroid's offset (m) from the cell's nominal centre (0 where unknown);
+    ``fine_known``/``fine_total`` count the fine cells with points / all fine cells
+    assigned to each coarse cell.
     """
 
     geometry: GridGeometry
@@ -222,6 +228,8 @@ class CoarseCells:
     last_seen: FloatArray
     offset_x: FloatArray
     offset_y: FloatArray
+    fine_known: NDArray[np.int64]
+    fine_total: NDArray[np.int64]
 
 
 class _Resampler:
@@ -240,6 +248,7 @@ class _Resampler:
         self.dx = x.ravel()[inside] - cx
         self.dy = y.ravel()[inside] - cy
         self.coarse = coarse
+        self.fine_total = np.bincount(self.coarse_index, minlength=coarse.size)
 
     def __call__(self, terrain: TerrainLayers) -> CoarseCells:
         geo = self.coarse
@@ -272,7 +281,9 @@ class _Resampler:
         shape = geo.shape
         return CoarseCells(geo, points.reshape(shape), elevation.reshape(shape),
                            low.reshape(shape), high.reshape(shape), seen.reshape(shape),
-                           offset_x.reshape(shape), offset_y.reshape(shape))
+                           offset_x.reshape(shape), offset_y.reshape(shape),
+                           np.bincount(idx, minlength=n).reshape(shape),
+                           self.fine_total.reshape(shape))
 
 
 def resample(terrain: TerrainLayers, coarse: GridGeometry) -> CoarseCells:
@@ -373,6 +384,16 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     hazard[~known] = np.nan
     hazard[hole] = 1.0
     goodness = np.where(hole, rules.inferred_goodness * hole_goodness, goodness)
+    if hole.any():  # the hole's rim: cells mostly unseen, seen only along an edge
+        ph = _padded(hole.astype(np.float64), 1, 0.0) > 0
+        beside = np.zeros((rows, cols), dtype=bool)
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                beside |= ph[1 + di:1 + di + rows, 1 + dj:1 + dj + cols]
+        rim = known & beside & (2 * cells.fine_known < cells.fine_total)
+        hazard[rim] = 1.0
+        goodness = np.where(rim, rules.inferred_goodness * goodness, goodness)
+        hole |= rim
 
     flags = np.where(far, FLAG_FAR, 0).astype(np.uint8)
     if rules.step_on:

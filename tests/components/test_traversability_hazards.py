@@ -68,17 +68,21 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
     fine, g = terrain.geometry, coarse.gridsize
     rows, cols = coarse.shape
     acc: dict[tuple[int, int], list[float]] = {}
+    fine_cells: dict[tuple[int, int], list[int]] = {}  # [with points, all]
     for fi in range(fine.rows):
         for fj in range(fine.cols):
             n = int(terrain.count[fi, fj])
-            if n == 0:
-                continue
             x = fine.origin_x + (fi + 0.5) * fine.gridsize
             y = fine.origin_y + (fj + 0.5) * fine.gridsize
             i = math.floor((x - coarse.origin_x) / g)
             j = math.floor((y - coarse.origin_y) / g)
             if not (0 <= i < rows and 0 <= j < cols):
                 continue
+            tally = fine_cells.setdefault((i, j), [0, 0])
+            tally[1] += 1
+            if n == 0:
+                continue
+            tally[0] += 1
             cx, cy = coarse.origin_x + (i + 0.5) * g, coarse.origin_y + (j + 0.5) * g
             a = acc.setdefault((i, j), [0, 0.0, 0.0, 0.0, math.inf, -math.inf, -math.inf])
             a[0] += n
@@ -249,6 +253,16 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
             out["hazard"][i, j] = hazard
             out["goodness"][i, j] = good[(i, j)]
             out["flags"][i, j] = flags
+    holes = (out["flags"] & FLAG_HOLE) != 0
+    for i in range(rows):
+        for j in range(cols):
+            with_points, total = fine_cells.get((i, j), [0, 0])
+            if cell(i, j) is None or 2 * with_points >= total:
+                continue
+            if holes[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].any():
+                out["hazard"][i, j] = 1.0
+                out["goodness"][i, j] *= rules.inferred_goodness
+                out["flags"][i, j] |= FLAG_HOLE
     return out
 
 
@@ -387,6 +401,20 @@ def test_the_unseen_shadow_behind_a_rock_is_not_a_hole() -> None:
     assert np.isnan(shadow).all()  # unknown, neither free nor a hazard
     assert not flagged(layers, FLAG_HOLE).any()
     assert flagged(layers, FLAG_STEP)[rows_at(3.6, 5.0)].any()
+
+
+def test_the_rim_of_a_hole_seen_only_along_its_edge_joins_it() -> None:
+    """As the ditch above, the lip at x = 5.6: the cell [5.5, 6.0) holds one seen row of
+    fine cells (x = 5.5) and two unseen ones over the ditch."""
+    x, _ = FINE.centres()
+    unseen = (x > 5.6) & (x < 7.2)
+    terrain = terrain_from(lambda x, y: 0.0 * x, known=~unseen,
+                           lows=lambda x, y: np.where((x > 7.2) & (x < 7.4), -0.5, np.inf))
+    layers = check_against_reference(terrain)
+    rim = rows_at(5.6, 5.9)
+    assert np.all(layers.count[rim] > 0)  # seen, along an edge
+    assert flagged(layers, FLAG_HOLE)[rim].all() and np.all(layers.hazard[rim] == 1.0)
+    assert np.all(layers.hazard[rows_at(-4.0, 5.4)] == 0.0)  # fully seen ground stays easy
 
 
 def test_a_hole_on_flat_ground_stays_unknown() -> None:
