@@ -26,7 +26,8 @@ Design choices:
   finer map), the highest hazard among them is taken.
 - **Combination of repeated observations**: an incoming observation replaces the
   stored one when ``goodness_new >= goodness_old · exp(-(t_new - t_old) / age_constant)``:
-  better data wins, and stored data loses its claim as it ages. Why not the
+  better data wins, and stored data loses its claim as it ages; an observation older
+  than the stored one (an event arriving out of order) never replaces it. Why not the
   alternatives: "latest wins" would let far-field re-evaluations (relaxed
   thresholds, lower goodness) of cells the vehicle has driven past erase obstacles
   it saw up close; "max" never forgets a phantom obstacle (a pose glitch, dust) and
@@ -169,6 +170,7 @@ class PlanningGrid:
         self.hazard = np.full(shape, np.nan)
         self.goodness = np.zeros(shape)
         self.stamp = np.full(shape, -np.inf)
+        self._scratch = np.empty(geometry.size, dtype=np.intp)
 
     @classmethod
     def centred(cls, centre_x: float, centre_y: float, width: float, depth: float,
@@ -219,6 +221,12 @@ class PlanningGrid:
         result: FloatArray = np.where(self.sensed, self.sensed_cost, self.a_priori)
         return result
 
+    def cost_at(self, i: IntArray, j: IntArray) -> FloatArray:
+        """:meth:`cost` of cells (i, j) only (inside the grid)."""
+        result: FloatArray = np.where(self.sensed[i, j], self.sensed_cost[i, j],
+                                      self.a_priori[i, j])
+        return result
+
     def set_a_priori(self, i: ArrayLike, j: ArrayLike, cost: ArrayLike) -> MapChange:
         """Set the a priori cost of cells (i, j) (broadcast). Cells outside the grid
         are skipped (counted in ``outside``). Raises ValueError for a cost below 1 or
@@ -231,7 +239,7 @@ class PlanningGrid:
             raise ValueError("a priori costs must be >= 1 or inf")
         inside = self.contains(ii, jj)
         ii, jj, cc = ii[inside], jj[inside], cc[inside]
-        old = self.cost()[ii, jj]
+        old = self.cost_at(ii, jj)
         self.a_priori[ii, jj] = cc
         return self._change(ii, jj, old, ii, jj, outside=int((~inside).sum()))
 
@@ -260,7 +268,7 @@ class PlanningGrid:
         outside = int(np.count_nonzero(~inside))
         flat = (fi[inside] * geo.cols + fj[inside]).astype(np.intp)
         hv, qv = hv[inside], qv[inside]
-        if len(flat) > 1:
+        if len(flat) > 1 and self._has_duplicates(flat):
             # one observation per planning cell: the highest hazard, then goodness
             order = np.lexsort((qv, hv, flat))
             flat, hv, qv = flat[order], hv[order], qv[order]
@@ -268,11 +276,12 @@ class PlanningGrid:
             np.not_equal(flat[1:], flat[:-1], out=last[:-1])
             flat, hv, qv = flat[last], hv[last], qv[last]
         ti, tj = np.divmod(flat, geo.cols)
-        stored = self.goodness[ti, tj] * np.exp(-(time - self.stamp[ti, tj]) / self.age_constant)
-        wins = ~self.sensed[ti, tj] | (qv >= stored)
+        age = time - self.stamp[ti, tj]  # inf where never sensed
+        stored = self.goodness[ti, tj] * np.exp(-np.maximum(age, 0.0) / self.age_constant)
+        wins = ~self.sensed[ti, tj] | ((qv >= stored) & (age >= 0))
         kept = int(np.count_nonzero(~wins))
         ti, tj, hv, qv = ti[wins], tj[wins], hv[wins], qv[wins]
-        old = self.cost()[ti, tj]
+        old = self.cost_at(ti, tj)
         self.hazard[ti, tj] = hv
         self.goodness[ti, tj] = qv
         self.stamp[ti, tj] = time
@@ -280,10 +289,17 @@ class PlanningGrid:
         self.sensed_cost[ti, tj] = self.cost_mapping(hv)
         return self._change(ti, tj, old, ti, tj, merged=len(flat), outside=outside, kept=kept)
 
+    def _has_duplicates(self, flat: IntArray) -> bool:
+        """Whether a cell index repeats (a rotated or finer map): O(n) with a scratch
+        array, so the aligned case skips the sort."""
+        order = np.arange(len(flat))
+        self._scratch[flat] = order  # with repeats, one write per cell survives
+        return bool(np.any(self._scratch[flat] != order))
+
     def _change(self, ti: IntArray, tj: IntArray, old: FloatArray, wi: IntArray,
                 wj: IntArray, *, merged: int = 0, outside: int = 0,
                 kept: int = 0) -> MapChange:
-        new = self.cost()[ti, tj]
+        new = self.cost_at(ti, tj)
         changed = old != new  # inf == inf: unchanged
         ci, cj = ti[changed], tj[changed]
         return MapChange(rows=ci, cols=cj, old_cost=old[changed], new_cost=new[changed],

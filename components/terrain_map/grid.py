@@ -57,6 +57,7 @@ __all__ = [
     "FuseStats",
     "TerrainGrid",
     "transform_points",
+    "SMALL_BATCH",
     "EgoView",
     "ego_map_pose",
     "yaw_of",
@@ -199,18 +200,40 @@ class FuseStats:
         return self.fused + self.outside + self.nonfinite
 
 
+#: Batches up to this many points are transformed with one matrix product; larger
+#: ones column by column (BLAS is slow for an (n, 3) x (3, 3) product, and its threads
+#: contend with everything else on a small machine).
+SMALL_BATCH = 4096
+
+
 def transform_points(transform: ArrayLike, points: ArrayLike) -> FloatArray:
     """Points ``(n, 3)`` mapped by the 4x4 homogeneous ``transform`` (``R p + t``), in
-    float64. Raises ValueError for bad shapes."""
+    float64. Deterministic for a given batch size (small batches use one matrix
+    product, large ones explicit column arithmetic; the two may differ in the last
+    bit). Raises ValueError for bad shapes."""
     t = np.asarray(transform, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64)
     if t.shape != (4, 4):
         raise ValueError(f"transform must be 4x4, got {t.shape}")
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3), got {p.shape}")
-    out: FloatArray = p @ t[:3, :3].T
-    out += t[:3, 3]
-    return out
+    if p.shape[0] <= SMALL_BATCH:
+        out: FloatArray = p @ np.ascontiguousarray(t[:3, :3].T)
+        out += t[:3, 3]
+        return out
+    columns = np.empty((3, p.shape[0]))  # returned transposed: each coordinate contiguous
+    scratch = np.empty(p.shape[0])
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    for r in range(3):
+        row = columns[r]
+        np.multiply(x, t[r, 0], out=row)
+        np.multiply(y, t[r, 1], out=scratch)
+        row += scratch
+        np.multiply(z, t[r, 2], out=scratch)
+        row += scratch
+        row += t[r, 3]
+    result: FloatArray = columns.T
+    return result
 
 
 class TerrainGrid:

@@ -263,10 +263,14 @@ class _Resampler:
             elevation = np.bincount(idx, weights=w * elev, minlength=n) / total
             offset_x = np.bincount(idx, weights=w * self.dx[known], minlength=n) / total
             offset_y = np.bincount(idx, weights=w * self.dy[known], minlength=n) / total
+        # (ufunc.at leaves its fast path when the value and target dtypes differ: the
+        # float32 layers are cast first, or this costs 40x more)
         low = np.full(n, np.inf)
-        np.minimum.at(low, idx, terrain.min_height.ravel().take(self.fine_index)[known])
+        np.minimum.at(low, idx, terrain.min_height.ravel().take(self.fine_index)[known]
+                      .astype(np.float64))
         high = np.full(n, -np.inf)
-        np.maximum.at(high, idx, terrain.max_height.ravel().take(self.fine_index)[known])
+        np.maximum.at(high, idx, terrain.max_height.ravel().take(self.fine_index)[known]
+                      .astype(np.float64))
         seen = np.full(n, -np.inf)
         if terrain.last_seen is not None:
             fine_seen = terrain.last_seen.ravel().take(self.fine_index)[known]
@@ -312,10 +316,38 @@ class TraversabilityLayers:
     count: NDArray[np.int32]
 
 
-def _padded(values: FloatArray, pad: int, fill: float) -> FloatArray:
-    out = np.full((values.shape[0] + 2 * pad, values.shape[1] + 2 * pad), fill)
+def _padded(values: NDArray[Any], pad: int, fill: float | bool) -> NDArray[Any]:
+    out = np.full((values.shape[0] + 2 * pad, values.shape[1] + 2 * pad), fill,
+                  dtype=values.dtype)
     out[pad:pad + values.shape[0], pad:pad + values.shape[1]] = values
     return out
+
+
+def _stacked(padded: NDArray[Any], pad: int, offsets: list[tuple[int, int]],
+             shape: tuple[int, int]) -> NDArray[Any]:
+    """``(len(offsets), rows, cols)``: layer m is the grid shifted so that cell [i, j]
+    holds the value of cell [i + di_m, j + dj_m] (the padding's fill beyond the
+    edge)."""
+    rows, cols = shape
+    return np.stack([padded[pad + di:pad + di + rows, pad + dj:pad + dj + cols]
+                     for di, dj in offsets])
+
+
+def _line(padded: NDArray[Any], pad: int, di: int, dj: int, reach: int,
+          shape: tuple[int, int]) -> NDArray[Any]:
+    """A read-only strided *view* ``(reach, rows, cols)``: layer ``k - 1`` is the grid
+    shifted so that cell [i, j] holds cell [i + k·di, j + k·dj], k = 1..reach. The
+    padding (``pad >= reach``) keeps every access inside ``padded``."""
+    s0, s1 = padded.strides
+    base = padded[pad + di:, pad + dj:]
+    view: NDArray[Any] = np.lib.stride_tricks.as_strided(
+        base, shape=(reach, *shape), strides=(di * s0 + dj * s1, s0, s1), writeable=False)
+    return view
+
+
+#: The eight neighbours and the 3x3 neighbourhood, as (di, dj) offsets.
+NEIGHBOURS = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj]
+NEIGHBOURHOOD = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1)]
 
 
 def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[float, float],
@@ -342,16 +374,10 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     tan_limit = np.tan(np.radians(limit))
 
     # --- step
-    pad = 1
-    pe = _padded(elev, pad, np.nan)
-    neighbour = np.zeros((rows, cols))
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            if di == 0 and dj == 0:
-                continue
-            shifted = pe[pad + di:pad + di + rows, pad + dj:pad + dj + cols]
-            np.fmax(neighbour, np.abs(shifted - elev), out=neighbour)  # fmax skips NaN
-    step = np.where(known, np.maximum(high - low, neighbour), np.nan)
+    around = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURS, (rows, cols))
+    differences = np.abs(around - elev)
+    differences[np.isnan(differences)] = 0.0  # unknown neighbours add nothing
+    step = np.where(known, np.maximum(high - low, differences.max(axis=0)), np.nan)
     with np.errstate(invalid="ignore"):
         step_full = known & (step >= threshold)
     if rules.step_percent:
@@ -385,11 +411,7 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     hazard[hole] = 1.0
     goodness = np.where(hole, rules.inferred_goodness * hole_goodness, goodness)
     if hole.any():  # the hole's rim: cells mostly unseen, seen only along an edge
-        ph = _padded(hole.astype(np.float64), 1, 0.0) > 0
-        beside = np.zeros((rows, cols), dtype=bool)
-        for di in (-1, 0, 1):
-            for dj in (-1, 0, 1):
-                beside |= ph[1 + di:1 + di + rows, 1 + dj:1 + dj + cols]
+        beside = _stacked(_padded(hole, 1, False), 1, NEIGHBOURHOOD, (rows, cols)).any(axis=0)
         rim = known & beside & (2 * cells.fine_known < cells.fine_total)
         hazard[rim] = 1.0
         goodness = np.where(rim, rules.inferred_goodness * goodness, goodness)
@@ -422,33 +444,20 @@ def _plane_slopes(elev: FloatArray, offset_x: FloatArray, offset_y: FloatArray, 
                   known: NDArray[np.bool_]) -> FloatArray:
     """Slope angle (deg) of the least-squares plane through the known cells of each
     known cell's 3x3 neighbourhood; NaN where unknown or degenerate."""
-    rows, cols = elev.shape
-    pe = _padded(elev, 1, np.nan)
-    px = _padded(offset_x / g, 1, 0.0)
-    py = _padded(offset_y / g, 1, 0.0)
-    sums = {name: np.zeros((rows, cols)) for name in
-            ("n", "x", "y", "xx", "xy", "yy", "z", "xz", "yz")}
+    shape = elev.shape
     centre = np.where(known, elev, 0.0)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            window = (slice(1 + di, 1 + di + rows), slice(1 + dj, 1 + dj + cols))
-            z = pe[window] - centre  # relative heights: better conditioned
-            w = ~np.isnan(z)
-            z = np.where(w, z, 0.0)
-            x = np.where(w, di + px[window], 0.0)  # positions in cells, centroid-corrected
-            y = np.where(w, dj + py[window], 0.0)
-            sums["n"] += w
-            sums["x"] += x
-            sums["y"] += y
-            sums["xx"] += x * x
-            sums["xy"] += x * y
-            sums["yy"] += y * y
-            sums["z"] += z
-            sums["xz"] += x * z
-            sums["yz"] += y * z
-    n, sx, sy = sums["n"], sums["x"], sums["y"]
-    sxx, sxy, syy = sums["xx"], sums["xy"], sums["yy"]
-    sz, sxz, syz = sums["z"], sums["xz"], sums["yz"]
+    z = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURHOOD, shape) - centre  # relative
+    w = ~np.isnan(z)
+    di = np.array([d[0] for d in NEIGHBOURHOOD], dtype=np.float64)[:, None, None]
+    dj = np.array([d[1] for d in NEIGHBOURHOOD], dtype=np.float64)[:, None, None]
+    # positions in cells, centroid-corrected; unknown cells weigh nothing
+    x = np.where(w, di + _stacked(_padded(offset_x / g, 1, 0.0), 1, NEIGHBOURHOOD, shape), 0.0)
+    y = np.where(w, dj + _stacked(_padded(offset_y / g, 1, 0.0), 1, NEIGHBOURHOOD, shape), 0.0)
+    z = np.where(w, z, 0.0)
+    n = w.sum(axis=0, dtype=np.float64)
+    sx, sy, sz = x.sum(axis=0), y.sum(axis=0), z.sum(axis=0)
+    sxx, sxy, syy = (x * x).sum(axis=0), (x * y).sum(axis=0), (y * y).sum(axis=0)
+    sxz, syz = (x * z).sum(axis=0), (y * z).sum(axis=0)
     # Cramer's rule on [[sxx sxy sx] [sxy syy sy] [sx sy n]] (a, b, c) = (sxz, syz, sz)
     m00 = syy * n - sy * sy
     m01 = sxy * n - sy * sx
@@ -470,53 +479,43 @@ def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
                         ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray]:
     """Sunken known cells, holes (unknown cells across a drop) and each hole's best
     bounding goodness; see the module doc."""
-    rows, cols = elev.shape
-    pe = _padded(elev, reach, np.nan)
-    pl = _padded(low, reach, np.nan)
-    pg = _padded(goodness, reach, 0.0)
-    pk = _padded(known.astype(np.float64), reach, 0.0) > 0
-    ps = _padded(stepped.astype(np.float64), reach, 0.0) > 0
+    shape = elev.shape
     fitted = np.tan(np.radians(slope))
-    pt = _padded(np.where(np.isnan(fitted), np.inf, fitted), reach, np.inf)
+    padded = {
+        "elev": _padded(elev, reach, np.nan),
+        "low": _padded(low, reach, np.nan),
+        "good": _padded(goodness, reach, 0.0),
+        "known": _padded(known, reach, False),
+        "step": _padded(stepped, reach, False),
+        "tan": _padded(np.where(np.isnan(fitted), np.inf, fitted), reach, np.inf),
+    }
     unknown = ~known
-    sunken = np.zeros((rows, cols), dtype=bool)
-    hole = np.zeros((rows, cols), dtype=bool)
-    hole_goodness = np.zeros((rows, cols))
+    sunken = np.zeros(shape, dtype=bool)
+    hole = np.zeros(shape, dtype=bool)
+    hole_goodness = np.zeros(shape)
+    steps = np.arange(1, reach + 1, dtype=np.float64)[:, None, None]  # k
+    rows_index, cols_index = np.indices(shape)
     for di, dj in AXES:
-        unit = math.hypot(di, dj) * g
-        sides = [[(slice(reach + sign * k * di, reach + sign * k * di + rows),
-                   slice(reach + sign * k * dj, reach + sign * k * dj + cols))
-                  for k in range(1, reach + 1)] for sign in (1, -1)]
-        highs = []  # sunken: the highest bank a legal slope allows, per side
-        nearest = []  # holes: the nearest known cell per side, and whether it is level
-        for side in sides:
-            high = np.full((rows, cols), -np.inf)
-            found = np.zeros((rows, cols), dtype=bool)
-            bank = np.full((rows, cols), np.nan)
-            distance = np.full((rows, cols), np.nan)
-            tan = np.full((rows, cols), np.inf)
-            faced = np.zeros((rows, cols), dtype=bool)
-            for k, window in enumerate(side, start=1):
-                np.fmax(high, pe[window] - tan_limit * (k * unit), out=high)  # skips NaN
-                new = pk[window] & ~found
-                bank[new] = pe[window][new]
-                distance[new] = k * unit
-                tan[new] = pt[window][new]
-                found |= new
-                faced |= ps[window]
-            highs.append(high)
-            nearest.append((found, bank, distance, tan, faced))
-        both = np.isfinite(highs[0]) & np.isfinite(highs[1])
+        ramp = steps * (math.hypot(di, dj) * g)  # (reach, 1, 1): distance d_k
+        sides = [{name: _line(values, reach, sign * di, sign * dj, reach, shape)
+                  for name, values in padded.items()} for sign in (1, -1)]
+        # sunken: the highest bank a legal slope allows, each side (fmax skips NaN)
+        highs = [np.fmax.reduce(side["elev"] - tan_limit * ramp, axis=0) for side in sides]
+        both = ~np.isnan(highs[0]) & ~np.isnan(highs[1])
         with np.errstate(invalid="ignore"):
             sunken |= known & both & (np.minimum(highs[0], highs[1]) - elev >= threshold)
+        # holes: the nearest known cell each side
+        nearest = []
+        for side in sides:
+            first = side["known"].argmax(axis=0)  # nearest known (0 when none: masked)
+            at = (first, rows_index, cols_index)
+            nearest.append((side["known"].any(axis=0), side["elev"][at], ramp[first, 0, 0],
+                            side["tan"][at], side["step"].any(axis=0)))
         (f1, b1, d1, t1, s1), (f2, b2, d2, t2, s2) = nearest
         trend = np.minimum(np.minimum(t1, t2), tan_limit)
-        deepest = np.full((rows, cols), np.inf)
-        best = np.zeros((rows, cols))
-        for side in sides:
-            for k, window in enumerate(side, start=1):
-                np.fmin(deepest, pl[window] + trend * (k * unit), out=deepest)
-                np.maximum(best, pg[window], out=best)
+        deepest = np.fmin(np.fmin.reduce(sides[0]["low"] + trend * ramp, axis=0),
+                          np.fmin.reduce(sides[1]["low"] + trend * ramp, axis=0))
+        best = np.maximum(sides[0]["good"].max(axis=0), sides[1]["good"].max(axis=0))
         bank1 = np.where(s1, -np.inf, b1 - trend * d1)  # a side with a face is no bank
         bank2 = np.where(s2, -np.inf, b2 - trend * d2)
         with np.errstate(invalid="ignore"):

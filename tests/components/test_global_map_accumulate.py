@@ -130,6 +130,10 @@ def test_combination_rule_better_data_wins_and_claims_age() -> None:
     # equal data: the latest observation wins
     change = grid.merge(one * 0.3, one * 0.6, map_pose(0, 0), 0.0, 0.0, 0.5, 12.5)
     assert change.kept == 0 and grid.hazard[10, 10] == pytest.approx(0.3)
+    # an older observation arriving late never replaces a newer one, however good
+    change = grid.merge(one * 1.0, one * 1.0, map_pose(0, 0), 0.0, 0.0, 0.5, 5.0)
+    assert change.kept == 1 and grid.hazard[10, 10] == pytest.approx(0.3)
+    assert grid.merge(one, one, map_pose(0, 0), 0.0, 0.0, 0.5, 1e9).kept == 0  # no overflow
 
 
 def test_repeated_identical_merge_writes_but_changes_no_cost() -> None:

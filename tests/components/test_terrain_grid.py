@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from components.terrain_map.grid import (
+    SMALL_BATCH,
     EgoView,
     GridGeometry,
     PoseAudit,
@@ -127,6 +128,21 @@ def test_fusion_equals_the_per_point_loop_exactly(gridsize: float) -> None:
         assert stats.total == len(world)
         oracle.assert_equal(grid)
     assert grid.fused_total > 1000 and grid.outside_total > 100 and grid.nonfinite_total > 40
+
+
+def test_transform_points_small_and_large_batches() -> None:
+    rng = np.random.default_rng(17)
+    t = pose(1.0, -2.0, 0.5, yaw=0.7, pitch=0.1, roll=-0.2)
+    pts = rng.normal(0.0, 5.0, (SMALL_BATCH + 10, 3)).astype(np.float32)
+    large = transform_points(t, pts)
+    small = transform_points(t, pts[:100])
+    np.testing.assert_allclose(small, large[:100], rtol=0, atol=1e-12)
+    # the large path is the Python expression R p + t, left to right, exactly
+    for (x, y, z), out in zip(pts[:50].astype(np.float64).tolist(), large[:50], strict=True):
+        expected = [t[r, 0] * x + t[r, 1] * y + t[r, 2] * z + t[r, 3] for r in range(3)]
+        assert out.tolist() == expected
+    with pytest.raises(ValueError):
+        transform_points(np.eye(3), pts)
 
 
 def test_all_inside_fast_path_equals_the_loop() -> None:
