@@ -477,7 +477,8 @@ class EgoView:
     pose change, i.e. resampled into itself, blurring it a little more each time and
     forgetting whatever fell off its edge. Sampling the world-fixed grid at
     publication time touches each published cell once (16 m × 16 m at 0.2 m: 6,400
-    cells, ~0.1 ms), never feeds back into the data, and keeps both maps consistent.
+    cells, well under a millisecond), never feeds back into the data, and keeps both
+    maps consistent.
 
     Sampling: each ego cell takes every layer of the global cell containing its
     centre (nearest cell, no interpolation, so counts, minima and maxima stay real

@@ -334,12 +334,14 @@ def test_step_percent_grades_the_step() -> None:
 
 
 @pytest.mark.parametrize("angle,axis,expect", [(19.0, "x", False), (21.0, "x", True),
-                                               (19.0, "y", False), (21.0, "y", True)])
+                                               (19.0, "y", False), (21.0, "y", True),
+                                               (19.5, "xy", False)])
 def test_ramp_just_under_and_over_maxslope(angle: float, axis: str, expect: bool) -> None:
     grade = math.tan(math.radians(angle))
-    layers = check_against_reference(
-        terrain_from(lambda x, y: grade * (x if axis == "x" else y)),
-        vehicle=(0.0, 0.0))
+    along = {"x": lambda x, y: x, "y": lambda x, y: y,
+             "xy": lambda x, y: (x + y) / math.sqrt(2)}[axis]  # xy: the worst case, where
+    layers = check_against_reference(  # a 0.6 m group spans 0.85 m of the ramp (0.29 m)
+        terrain_from(lambda x, y: grade * along(x, y)), vehicle=(0.0, 0.0))
     near = ~flagged(layers, FLAG_FAR)
     interior = np.zeros(COARSE.shape, bool)
     interior[1:-1, 1:-1] = True
@@ -348,7 +350,7 @@ def test_ramp_just_under_and_over_maxslope(angle: float, axis: str, expect: bool
     assert not flagged(layers, FLAG_STEP).any()  # a ramp is not a step
     assert flagged(layers, FLAG_SLOPE)[near & interior].all() == expect
     if not expect:
-        assert layers.hazard[near].max() == pytest.approx(19.0 / 20.0, abs=1e-4)
+        assert layers.hazard[near].max() == pytest.approx(angle / 20.0, abs=1e-4)
     # far field: the limit relaxes to 30 degrees
     assert not flagged(layers, FLAG_SLOPE)[~near].any()
 
