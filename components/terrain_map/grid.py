@@ -58,6 +58,7 @@ __all__ = [
     "TerrainGrid",
     "transform_points",
     "SMALL_BATCH",
+    "CHUNK",
     "EgoView",
     "ego_map_pose",
     "yaw_of",
@@ -200,6 +201,11 @@ class FuseStats:
         return self.fused + self.outside + self.nonfinite
 
 
+#: Points fused per pass: a large batch goes through in chunks of this size, in order,
+#: reusing preallocated scratch arrays (fresh multi-megabyte temporaries per call cost
+#: page faults; chunks also stay in cache).
+CHUNK = 32768
+
 #: Batches up to this many points are transformed with one matrix product; larger
 #: ones column by column (BLAS is slow for an (n, 3) x (3, 3) product, and its threads
 #: contend with everything else on a small machine).
@@ -208,32 +214,38 @@ SMALL_BATCH = 4096
 
 def transform_points(transform: ArrayLike, points: ArrayLike) -> FloatArray:
     """Points ``(n, 3)`` mapped by the 4x4 homogeneous ``transform`` (``R p + t``), in
-    float64. Deterministic for a given batch size (small batches use one matrix
-    product, large ones explicit column arithmetic; the two may differ in the last
-    bit). Raises ValueError for bad shapes."""
+    float64. Deterministic for a given batch size: up to :data:`SMALL_BATCH` points use
+    one matrix product, more use explicit column arithmetic (the Python expression
+    ``R[r,0]·x + R[r,1]·y + R[r,2]·z + t[r]``, exactly); the two may differ in the last
+    bit. Raises ValueError for bad shapes."""
     t = np.asarray(transform, dtype=np.float64)
-    p = np.asarray(points, dtype=np.float64)
+    p = np.asarray(points)
     if t.shape != (4, 4):
         raise ValueError(f"transform must be 4x4, got {t.shape}")
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3), got {p.shape}")
-    if p.shape[0] <= SMALL_BATCH:
+    return _transform(t, p, columns=p.shape[0] > SMALL_BATCH)
+
+
+def _transform(t: FloatArray, points: NDArray[Any], *, columns: bool) -> FloatArray:
+    p = points.astype(np.float64, copy=False)
+    if not columns:
         out: FloatArray = p @ np.ascontiguousarray(t[:3, :3].T)
         out += t[:3, 3]
         return out
-    columns = np.empty((3, p.shape[0]))  # returned transposed: each coordinate contiguous
+    result = np.empty((3, p.shape[0]))  # returned transposed: each coordinate contiguous
     scratch = np.empty(p.shape[0])
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     for r in range(3):
-        row = columns[r]
+        row = result[r]
         np.multiply(x, t[r, 0], out=row)
         np.multiply(y, t[r, 1], out=scratch)
         row += scratch
         np.multiply(z, t[r, 2], out=scratch)
         row += scratch
         row += t[r, 3]
-    result: FloatArray = columns.T
-    return result
+    transposed: FloatArray = result.T
+    return transposed
 
 
 class TerrainGrid:
@@ -255,6 +267,11 @@ class TerrainGrid:
         self.max_z = np.full(n, -np.inf, dtype=np.float64)
         self.last_seen = np.full(n, -np.inf, dtype=np.float64)
         self._newest = -math.inf  # newest time ever fused (an upper bound of last_seen)
+        # scratch for one chunk of points, reused by every fuse
+        self._fi, self._fj, self._low, self._z = (np.empty(CHUNK) for _ in range(4))
+        self._flat = np.empty(CHUNK, dtype=np.intp)
+        self._inside = np.empty(CHUNK, dtype=bool)
+        self._test = np.empty(CHUNK, dtype=bool)
         #: Points fused, dropped outside the grid, dropped as non-finite, since creation.
         self.fused_total = 0
         self.outside_total = 0
@@ -289,55 +306,74 @@ class TerrainGrid:
         Points with a non-finite coordinate are dropped and counted as ``nonfinite``;
         points whose cell lies outside the grid are dropped and counted as
         ``outside``. Equal, bit for bit, to adding each remaining point in input
-        order with Python floats (see the module doc). Raises ValueError for a bad
-        shape or a non-finite ``time``.
+        order with Python floats (see the module doc); large batches go through in
+        order, :data:`CHUNK` points at a time, which keeps that order. Raises
+        ValueError for a bad shape or a non-finite ``time``.
         """
         p = np.asarray(points)
         if p.ndim != 2 or p.shape[1] != 3:
             raise ValueError(f"points must have shape (n, 3), got {p.shape}")
         if not math.isfinite(time):
             raise ValueError("time must be finite")
-        if p.dtype != np.float64:
-            p = p.astype(np.float64)
+        n = p.shape[0]
+        fused = nonfinite = 0
+        for start in range(0, n, CHUNK):
+            # float64 first: ufuncs on float32 input compute in float32, even into a
+            # float64 output
+            f, bad = self._fuse_chunk(p[start:start + CHUNK].astype(np.float64, copy=False),
+                                      time)
+            fused += f
+            nonfinite += bad
+        outside = n - fused - nonfinite
+        self.fused_total += fused
+        self.outside_total += outside
+        self.nonfinite_total += nonfinite
+        return FuseStats(fused=fused, outside=outside, nonfinite=nonfinite)
+
+    def _fuse_chunk(self, p: NDArray[np.float64], time: float) -> tuple[int, int]:
+        """Fuse up to CHUNK float64 points through the scratch buffers; returns
+        (fused, nonfinite)."""
         n = p.shape[0]
         geo = self._geometry
+        fi, fj, low, z = (self._fi[:n], self._fj[:n], self._low[:n], self._z[:n])
+        inside, test = self._inside[:n], self._test[:n]
+        np.copyto(z, p[:, 2])  # contiguous: ufunc.at is ~2x faster than on a strided column
         # Cell coordinates as floats: NaN and ±inf fail every comparison below, so the
         # bounds mask drops them before anything is cast to an integer. (A finite
         # coordinate near 1e308 may overflow to inf here: it is outside either way.)
         with np.errstate(over="ignore", invalid="ignore"):
-            fi = p[:, 0] - geo.origin_x
+            np.subtract(p[:, 0], geo.origin_x, out=fi)
             fi /= geo.gridsize
-            fj = p[:, 1] - geo.origin_y
+            np.subtract(p[:, 1], geo.origin_y, out=fj)
             fj /= geo.gridsize
         np.floor(fi, out=fi)
         np.floor(fj, out=fj)
-        z = p[:, 2]
-        zfinite = np.isfinite(z)
-        inside = np.minimum(fi, fj) >= 0  # NaN propagates through minimum: False
-        inside &= fi < geo.rows
-        inside &= fj < geo.cols
-        inside &= zfinite
+        np.greater_equal(np.minimum(fi, fj, out=low), 0, out=inside)  # NaN: False
+        inside &= np.less(fi, geo.rows, out=test)
+        inside &= np.less(fj, geo.cols, out=test)
+        inside &= np.isfinite(z, out=test)
         fused = int(np.count_nonzero(inside))
         if fused == n:  # the common case: nothing to compress
             nonfinite = 0
             fi *= geo.cols
             fi += fj
-            flat = fi.astype(np.intp)
-            zs = z.copy()  # contiguous: ufunc.at runs ~2x faster than on a strided column
+            flat = self._flat[:n]
+            np.copyto(flat, fi, casting="unsafe")  # whole non-negative values: exact
+            zs = z
         else:
             finite = np.isfinite(p[:, 0])
             finite &= np.isfinite(p[:, 1])
-            finite &= zfinite
+            finite &= np.isfinite(z)
             nonfinite = n - int(np.count_nonzero(finite))
-            fi = fi[inside]
-            fi *= geo.cols
-            fi += fj[inside]
-            flat = fi.astype(np.intp)
+            cells = fi[inside]
+            cells *= geo.cols
+            cells += fj[inside]
+            flat = cells.astype(np.intp)
             zs = z[inside]
         if fused:
             np.add.at(self.count, flat, 1)
             np.add.at(self.sum_z, flat, zs)
-            np.add.at(self.sum_z2, flat, zs * zs)
+            np.add.at(self.sum_z2, flat, np.multiply(zs, zs, out=low[:fused]))
             np.minimum.at(self.min_z, flat, zs)
             np.maximum.at(self.max_z, flat, zs)
             if time >= self._newest:  # every stored time is older: plain assignment
@@ -345,17 +381,33 @@ class TerrainGrid:
                 self._newest = time
             else:  # a late batch must not make a cell look older than it is
                 np.maximum.at(self.last_seen, flat, time)
-        outside = n - fused - nonfinite
+        return fused, nonfinite
+
+    def fuse_transformed(self, points: ArrayLike, map_from_sensor: ArrayLike,
+                         time: float) -> FuseStats:
+        """``fuse(transform_points(map_from_sensor, points), time)``, exactly, chunk by
+        chunk (no full-size temporaries). Compose ^M T_V · ^V T_S once per scan, not
+        per point. Raises ValueError as both do."""
+        t = np.asarray(map_from_sensor, dtype=np.float64)
+        p = np.asarray(points)
+        if t.shape != (4, 4):
+            raise ValueError(f"transform must be 4x4, got {t.shape}")
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ValueError(f"points must have shape (n, 3), got {p.shape}")
+        if not math.isfinite(time):
+            raise ValueError("time must be finite")
+        columns = p.shape[0] > SMALL_BATCH  # the path transform_points takes for them all
+        fused = nonfinite = 0
+        for start in range(0, p.shape[0], CHUNK):
+            f, bad = self._fuse_chunk(_transform(t, p[start:start + CHUNK], columns=columns),
+                                      time)
+            fused += f
+            nonfinite += bad
+        outside = p.shape[0] - fused - nonfinite
         self.fused_total += fused
         self.outside_total += outside
         self.nonfinite_total += nonfinite
         return FuseStats(fused=fused, outside=outside, nonfinite=nonfinite)
-
-    def fuse_transformed(self, points: ArrayLike, map_from_sensor: ArrayLike,
-                         time: float) -> FuseStats:
-        """:meth:`fuse` of sensor-frame points mapped by the 4x4 ``map_from_sensor``
-        (compose ^M T_V · ^V T_S once per scan, not per point)."""
-        return self.fuse(transform_points(map_from_sensor, points), time)
 
     # ------------------------------------------------------------------ scrolling
     def recentre(self, x: float, y: float, *, slack: int = 0) -> tuple[int, int]:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from components.terrain_map.grid import (
+    CHUNK,
     SMALL_BATCH,
     EgoView,
     GridGeometry,
@@ -155,6 +156,34 @@ def test_all_inside_fast_path_equals_the_loop() -> None:
         assert stats.fused == 361
         oracle.fuse(pts.astype(np.float64), t)
     oracle.assert_equal(grid)
+
+
+def test_float32_points_are_binned_in_float64() -> None:
+    """float32 scans near cell edges, against an origin float32 cannot represent, and
+    a batch spanning several chunks: float64 arithmetic throughout, as the loop."""
+    rng = np.random.default_rng(23)
+    geometry = GridGeometry(0.1, -0.3, 0.2, 40, 40)
+    edges = 0.1 + 0.2 * rng.integers(0, 40, CHUNK + 5000)
+    pts = np.column_stack([edges + rng.normal(0.0, 2e-7, len(edges)),
+                           rng.uniform(-0.3, 7.7, len(edges)),
+                           rng.normal(0.0, 1.0, len(edges))]).astype(np.float32)
+    grid, oracle = TerrainGrid(geometry), LoopGrid(geometry)
+    assert grid.fuse(pts, 1.0).total == len(pts)
+    oracle.fuse(pts.astype(np.float64), 1.0)
+    oracle.assert_equal(grid)
+
+
+def test_fuse_transformed_is_fuse_of_transform_points() -> None:
+    rng = np.random.default_rng(29)
+    t = pose(0.4, -0.2, 1.9, yaw=2.0, pitch=0.05)
+    for n in (361, SMALL_BATCH + 1, CHUNK + 1000):
+        pts = rng.uniform(-9, 9, (n, 3)).astype(np.float32)
+        pts[::97] = np.nan
+        a = TerrainGrid.centred(0, 0, 16, 16, 0.2)
+        b = TerrainGrid.centred(0, 0, 16, 16, 0.2)
+        assert a.fuse_transformed(pts, t, 2.0) == b.fuse(transform_points(t, pts), 2.0)
+        for name in ("count", "sum_z", "sum_z2", "min_z", "max_z", "last_seen"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), (n, name)
 
 
 def test_floor_semantics_on_exact_edges() -> None:
