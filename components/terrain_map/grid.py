@@ -227,14 +227,19 @@ def transform_points(transform: ArrayLike, points: ArrayLike) -> FloatArray:
     return _transform(t, p, columns=p.shape[0] > SMALL_BATCH)
 
 
-def _transform(t: FloatArray, points: NDArray[Any], *, columns: bool) -> FloatArray:
+def _transform(t: FloatArray, points: NDArray[Any], *, columns: bool,
+               result: FloatArray | None = None, scratch: FloatArray | None = None
+               ) -> FloatArray:
+    """transform_points' arithmetic; the column path writes into ``result`` (3, n) and
+    ``scratch`` (n,) when given (float64 ``points`` expected there)."""
     p = points.astype(np.float64, copy=False)
     if not columns:
         out: FloatArray = p @ np.ascontiguousarray(t[:3, :3].T)
         out += t[:3, 3]
         return out
-    result = np.empty((3, p.shape[0]))  # returned transposed: each coordinate contiguous
-    scratch = np.empty(p.shape[0])
+    n = p.shape[0]
+    if result is None or scratch is None:
+        result, scratch = np.empty((3, n)), np.empty(n)
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     for r in range(3):
         row = result[r]
@@ -272,6 +277,8 @@ class TerrainGrid:
         self._flat = np.empty(CHUNK, dtype=np.intp)
         self._inside = np.empty(CHUNK, dtype=bool)
         self._test = np.empty(CHUNK, dtype=bool)
+        self._points = np.empty((CHUNK, 3))
+        self._rows = np.empty((3, CHUNK))
         #: Points fused, dropped outside the grid, dropped as non-finite, since creation.
         self.fused_total = 0
         self.outside_total = 0
@@ -318,10 +325,7 @@ class TerrainGrid:
         n = p.shape[0]
         fused = nonfinite = 0
         for start in range(0, n, CHUNK):
-            # float64 first: ufuncs on float32 input compute in float32, even into a
-            # float64 output
-            f, bad = self._fuse_chunk(p[start:start + CHUNK].astype(np.float64, copy=False),
-                                      time)
+            f, bad = self._fuse_chunk(self._float64(p[start:start + CHUNK]), time)
             fused += f
             nonfinite += bad
         outside = n - fused - nonfinite
@@ -329,6 +333,15 @@ class TerrainGrid:
         self.outside_total += outside
         self.nonfinite_total += nonfinite
         return FuseStats(fused=fused, outside=outside, nonfinite=nonfinite)
+
+    def _float64(self, chunk: NDArray[Any]) -> NDArray[np.float64]:
+        """A chunk as float64, copied into scratch if needed: ufuncs on float32 input
+        compute in float32, even into a float64 output."""
+        if chunk.dtype == np.float64:
+            return chunk
+        out = self._points[:chunk.shape[0]]
+        np.copyto(out, chunk)
+        return out
 
     def _fuse_chunk(self, p: NDArray[np.float64], time: float) -> tuple[int, int]:
         """Fuse up to CHUNK float64 points through the scratch buffers; returns
@@ -399,8 +412,11 @@ class TerrainGrid:
         columns = p.shape[0] > SMALL_BATCH  # the path transform_points takes for them all
         fused = nonfinite = 0
         for start in range(0, p.shape[0], CHUNK):
-            f, bad = self._fuse_chunk(_transform(t, p[start:start + CHUNK], columns=columns),
-                                      time)
+            chunk = self._float64(p[start:start + CHUNK])
+            m = chunk.shape[0]
+            f, bad = self._fuse_chunk(_transform(t, chunk, columns=columns,
+                                                 result=self._rows[:, :m],
+                                                 scratch=self._low[:m]), time)
             fused += f
             nonfinite += bad
         outside = p.shape[0] - fused - nonfinite
