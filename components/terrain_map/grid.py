@@ -68,6 +68,7 @@ __all__ = [
     "AuditResult",
     "PoseBuffer",
     "interpolate_transform",
+    "rotation_angle",
     "StereoBalance",
 ]
 
