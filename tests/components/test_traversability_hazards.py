@@ -1,0 +1,526 @@
+"""Traversability core (components/traversability_map/hazards.py) against a plain
+per-cell reference on synthetic terrains: flat, steps, ramps, ditches, a wall, the far
+field, and random rough terrain with holes."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from components.terrain_map.grid import GridGeometry, TerrainLayers
+from components.traversability_map.hazards import (
+    AXES,
+    FLAG_FAR,
+    FLAG_HOLE,
+    FLAG_SLOPE,
+    FLAG_STEP,
+    FLAG_SUNKEN,
+    HazardRules,
+    LastSeenTracker,
+    TraversabilityLayers,
+    TraversabilityMapper,
+    resample,
+)
+from components.traversability_map.parameters import TraversabilityMapParameters
+
+# fine terrain 0.2 m, coarse 0.5 m; x from -4 to 20 m (vehicle at 0, far field beyond 8)
+FINE = GridGeometry(-4.0, -6.0, 0.2, 120, 60)
+COARSE = GridGeometry(-4.0, -6.0, 0.5, 48, 24)
+VEHICLE = (0.0, 0.0)
+NOW = 10.0
+
+Height = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def terrain_from(height: Height, known: np.ndarray | None = None, *, count: int = 4,
+                 seen: float = NOW, lows: Height | None = None,
+                 geometry: GridGeometry = FINE) -> TerrainLayers:
+    """Fine layers of a height function: elevation at the centre, min/max over nine
+    samples inside the cell (±0.45 g), optional deeper minima ``lows``."""
+    x, y = geometry.centres()
+    g = geometry.gridsize
+    samples = np.stack([height(x + a * g, y + b * g) for a in (-0.45, 0.0, 0.45)
+                        for b in (-0.45, 0.0, 0.45)])
+    low = samples.min(axis=0)
+    if lows is not None:
+        low = np.minimum(low, lows(x, y))
+    mask = np.ones(geometry.shape, bool) if known is None else known
+    nan = np.float32(np.nan)
+    return TerrainLayers(
+        geometry=geometry,
+        elevation=np.where(mask, height(x, y), nan).astype(np.float32),
+        min_height=np.where(mask, low, nan).astype(np.float32),
+        max_height=np.where(mask, samples.max(axis=0), nan).astype(np.float32),
+        count=np.where(mask, count, 0).astype(np.int32),
+        variance=np.where(mask, 0.0, nan).astype(np.float32),
+        last_seen=np.where(mask, seen, np.nan))
+
+
+# --- the reference ---------------------------------------------------------------------
+
+
+def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
+              vehicle: tuple[float, float], now: float) -> dict[str, np.ndarray]:
+    """Per-cell loops written from the module doc, independently of the code."""
+    fine, g = terrain.geometry, coarse.gridsize
+    rows, cols = coarse.shape
+    acc: dict[tuple[int, int], list[float]] = {}
+    fine_cells: dict[tuple[int, int], list[int]] = {}  # [with points, all]
+    for fi in range(fine.rows):
+        for fj in range(fine.cols):
+            n = int(terrain.count[fi, fj])
+            x = fine.origin_x + (fi + 0.5) * fine.gridsize
+            y = fine.origin_y + (fj + 0.5) * fine.gridsize
+            i = math.floor((x - coarse.origin_x) / g)
+            j = math.floor((y - coarse.origin_y) / g)
+            if not (0 <= i < rows and 0 <= j < cols):
+                continue
+            tally = fine_cells.setdefault((i, j), [0, 0])
+            tally[1] += 1
+            if n == 0:
+                continue
+            tally[0] += 1
+            cx, cy = coarse.origin_x + (i + 0.5) * g, coarse.origin_y + (j + 0.5) * g
+            a = acc.setdefault((i, j), [0, 0.0, 0.0, 0.0, math.inf, -math.inf, -math.inf])
+            a[0] += n
+            a[1] += n * float(terrain.elevation[fi, fj])
+            a[2] += n * (x - cx)
+            a[3] += n * (y - cy)
+            a[4] = min(a[4], float(terrain.min_height[fi, fj]))
+            a[5] = max(a[5], float(terrain.max_height[fi, fj]))
+            if terrain.last_seen is not None and not math.isnan(terrain.last_seen[fi, fj]):
+                a[6] = max(a[6], float(terrain.last_seen[fi, fj]))
+
+    def cell(i: int, j: int) -> list[float] | None:
+        a = acc.get((i, j))
+        return a if a is not None and a[0] >= rules.min_points else None
+
+    def elev(i: int, j: int) -> float:
+        a = cell(i, j)
+        assert a is not None
+        return a[1] / a[0]
+
+    out = {name: np.full((rows, cols), np.nan) for name in ("hazard", "step", "slope")}
+    out["goodness"] = np.zeros((rows, cols))
+    out["flags"] = np.zeros((rows, cols), dtype=np.uint8)
+    reach = math.ceil(rules.hole_reach / g - 1e-9)
+
+    def params(i: int, j: int) -> tuple[bool, float, float]:
+        cx, cy = coarse.origin_x + (i + 0.5) * g, coarse.origin_y + (j + 0.5) * g
+        far = math.hypot(cx - vehicle[0], cy - vehicle[1]) > rules.far_field
+        t = rules.step_height * (rules.far_field_scale if far else 1.0)
+        limit = min(rules.max_slope * rules.far_field_slope_scale, 89.9) if far \
+            else rules.max_slope
+        return far, t, limit
+
+    def goodness(i: int, j: int) -> float:
+        a = cell(i, j)
+        if a is None:
+            return 0.0
+        far, _, _ = params(i, j)
+        age = 0.0 if a[6] == -math.inf else max(now - a[6], 0.0)
+        accuracy = min(1.0, 1.0 / rules.far_field_scale) if far else 1.0
+        return (1 - math.exp(-a[0] / rules.goodness_points)) \
+            * math.exp(-age / rules.goodness_time) * accuracy
+
+    good = {(i, j): goodness(i, j) for i in range(rows) for j in range(cols)}
+    slopes: dict[tuple[int, int], float] = {}  # fitted slope (deg) of known cells
+    for i in range(rows):
+        for j in range(cols):
+            if cell(i, j) is None:
+                continue
+            e = elev(i, j)
+            points = []
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    ii, jj = i + di, j + dj
+                    b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
+                    if b is not None:
+                        points.append((di + b[2] / b[0] / g, dj + b[3] / b[0] / g,
+                                       b[1] / b[0] - e))
+            design = np.array([[p[0], p[1], 1.0] for p in points])
+            if len(points) >= 3 and np.linalg.det(design.T @ design) >= 0.25:
+                solution = np.linalg.lstsq(design, np.array([p[2] for p in points]),
+                                           rcond=None)[0]
+                slopes[(i, j)] = math.degrees(math.atan(math.hypot(solution[0],
+                                                                   solution[1]) / g))
+
+    def line(i: int, j: int, di: int, dj: int, sign: int) -> list[tuple[float, list[float]]]:
+        """(distance, cell) of the known cells on one side, nearest first."""
+        found = []
+        for k in range(1, reach + 1):
+            ii, jj = i + sign * k * di, j + sign * k * dj
+            b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
+            if b is not None:
+                found.append((k * math.hypot(di, dj) * g, b, (ii, jj)))
+        return found
+
+    def side_goodness(i: int, j: int, di: int, dj: int, sign: int) -> float:
+        best = 0.0
+        for k in range(1, reach + 1):
+            ii, jj = i + sign * k * di, j + sign * k * dj
+            if 0 <= ii < rows and 0 <= jj < cols:
+                best = max(best, good[(ii, jj)])
+        return best
+
+    stepped: set[tuple[int, int]] = set()  # known cells with step >= T
+    for i in range(rows):
+        for j in range(cols):
+            a = cell(i, j)
+            if a is None:
+                continue
+            e = elev(i, j)
+            spread = a[5] - a[4]
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    ii, jj = i + di, j + dj
+                    b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
+                    if b is not None:
+                        spread = max(spread, abs(b[1] / b[0] - e))
+            if spread >= params(i, j)[1]:
+                stepped.add((i, j))
+
+    def faced(i: int, j: int, di: int, dj: int, sign: int) -> bool:
+        return any((i + sign * k * di, j + sign * k * dj) in stepped
+                   for k in range(1, reach + 1))
+
+    for i in range(rows):
+        for j in range(cols):
+            far, t, limit = params(i, j)
+            flags = FLAG_FAR if far else 0
+            a = cell(i, j)
+            s = math.tan(math.radians(limit))
+            sunken = hole = False
+            hole_good = 0.0
+            for di, dj in AXES if rules.step_on else ():
+                one, two = line(i, j, di, dj, 1), line(i, j, di, dj, -1)
+                if not (one and two):
+                    continue
+                if a is not None:
+                    h1 = max(b[1] / b[0] - s * d for d, b, _ in one)
+                    h2 = max(b[1] / b[0] - s * d for d, b, _ in two)
+                    sunken |= min(h1, h2) - elev(i, j) >= t
+                    continue
+                trend = s
+                for side in (one, two):
+                    if side[0][2] in slopes:
+                        trend = min(trend, math.tan(math.radians(slopes[side[0][2]])))
+                high = -math.inf
+                for sign, side in ((1, one), (-1, two)):
+                    d, b, _ = side[0]
+                    if not faced(i, j, di, dj, sign):
+                        high = max(high, b[1] / b[0] - trend * d)
+                low = min(b[4] + trend * d for d, b, _ in one + two)
+                if high - low >= t:
+                    hole = True
+                    hole_good = max(hole_good, side_goodness(i, j, di, dj, 1),
+                                    side_goodness(i, j, di, dj, -1))
+            if a is None:
+                if hole:
+                    out["hazard"][i, j] = 1.0
+                    out["goodness"][i, j] = rules.inferred_goodness * hole_good
+                    flags |= FLAG_HOLE
+                out["flags"][i, j] = flags
+                continue
+            e = elev(i, j)
+            neighbour = 0.0
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    ii, jj = i + di, j + dj
+                    b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
+                    if b is not None and (di or dj):
+                        neighbour = max(neighbour, abs(b[1] / b[0] - e))
+            step = max(a[5] - a[4], neighbour)
+            out["step"][i, j] = step
+            hazard = 0.0
+            if rules.step_on:
+                if step >= t:
+                    flags |= FLAG_STEP
+                hazard = min(step / t, 1.0) if rules.step_percent else float(step >= t)
+                if sunken:
+                    hazard = 1.0
+                    flags |= FLAG_SUNKEN
+            if (i, j) in slopes:
+                slope = slopes[(i, j)]
+                out["slope"][i, j] = slope
+                if rules.slope_on:
+                    hazard = max(hazard, min(slope / limit, 1.0))
+                    if slope >= limit:
+                        flags |= FLAG_SLOPE
+            out["hazard"][i, j] = hazard
+            out["goodness"][i, j] = good[(i, j)]
+            out["flags"][i, j] = flags
+    holes = (out["flags"] & FLAG_HOLE) != 0
+    for i in range(rows):
+        for j in range(cols):
+            with_points, total = fine_cells.get((i, j), [0, 0])
+            if cell(i, j) is None or 2 * with_points >= total:
+                continue
+            if holes[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].any():
+                out["hazard"][i, j] = 1.0
+                out["goodness"][i, j] *= rules.inferred_goodness
+                out["flags"][i, j] |= FLAG_HOLE
+    return out
+
+
+def check_against_reference(terrain: TerrainLayers, rules: HazardRules | None = None,
+                            vehicle: tuple[float, float] = VEHICLE) -> TraversabilityLayers:
+    rules = rules or HazardRules()
+    got = TraversabilityMapper(rules).update(terrain, COARSE, vehicle, NOW)
+    want = reference(terrain, COARSE, rules, vehicle, NOW)
+    for name in ("hazard", "goodness", "step", "slope"):
+        np.testing.assert_allclose(getattr(got, name), want[name], rtol=1e-5, atol=1e-5,
+                                   equal_nan=True, err_msg=name)
+    np.testing.assert_array_equal(got.flags, want["flags"])
+    known = ~np.isnan(got.hazard)
+    assert np.all((got.hazard[known] >= 0) & (got.hazard[known] <= 1))
+    assert np.all((got.goodness >= 0) & (got.goodness <= 1))
+    return got
+
+
+def flagged(layers: TraversabilityLayers, flag: int) -> np.ndarray:
+    return (layers.flags & flag) != 0
+
+
+def rows_at(x0: float, x1: float) -> slice:
+    """Coarse rows whose centres lie in [x0, x1)."""
+    return slice(math.ceil((x0 - COARSE.origin_x) / 0.5 - 0.5),
+                 math.ceil((x1 - COARSE.origin_x) / 0.5 - 0.5))
+
+
+# --- synthetic terrains ----------------------------------------------------------------
+
+
+def test_flat_ground_is_easy_everywhere() -> None:
+    layers = check_against_reference(terrain_from(lambda x, y: 0.0 * x + 1.0))
+    assert np.all(layers.hazard == 0.0)
+    assert np.all(layers.slope == 0.0)
+    far = flagged(layers, FLAG_FAR)
+    assert far.any() and (~far).any()
+    # goodness: 4 points per fine cell, 4..9 fine cells per coarse cell, all fresh
+    assert layers.goodness[~far].min() > 0.95
+    assert layers.goodness[far].max() < 1 / 1.5 + 1e-6
+
+
+@pytest.mark.parametrize("height,x_step,expect", [
+    (0.29, 3.0, False), (0.31, 3.0, True),      # near field: T = 0.30 m
+    (0.40, 12.0, False), (0.46, 12.0, True),    # far field: T = 0.45 m (relaxed)
+])
+def test_step_just_under_and_over_stepheight(height: float, x_step: float,
+                                             expect: bool) -> None:
+    layers = check_against_reference(terrain_from(
+        lambda x, y: np.where(x >= x_step + 0.05, height, 0.0)))
+    steps = flagged(layers, FLAG_STEP)
+    assert steps.any() == expect
+    if expect:
+        band = steps[rows_at(x_step - 0.6, x_step + 0.6)]
+        assert band.all(axis=0).all()  # the whole step line, both sides
+        assert steps.sum() == band.sum()
+        assert np.all(layers.hazard[steps] == 1.0)
+    else:  # binary: no step hazard; the plane fit still sees a steep ramp there
+        assert layers.hazard.max() < 1.0
+
+
+def test_step_percent_grades_the_step() -> None:
+    rules = HazardRules(step_percent=True, slope_on=False)
+    layers = check_against_reference(
+        terrain_from(lambda x, y: np.where(x >= 3.05, 0.15, 0.0)), rules)
+    band = layers.hazard[rows_at(2.4, 3.6)]
+    assert band.max() == pytest.approx(0.5, abs=1e-6)  # 0.15 m of a 0.30 m step
+    assert layers.hazard.max() < 1.0
+
+
+@pytest.mark.parametrize("angle,axis,expect", [(19.0, "x", False), (21.0, "x", True),
+                                               (19.0, "y", False), (21.0, "y", True),
+                                               (19.5, "xy", False)])
+def test_ramp_just_under_and_over_maxslope(angle: float, axis: str, expect: bool) -> None:
+    grade = math.tan(math.radians(angle))
+    along = {"x": lambda x, y: x, "y": lambda x, y: y,
+             "xy": lambda x, y: (x + y) / math.sqrt(2)}[axis]  # xy: the worst case, where
+    layers = check_against_reference(  # a 0.6 m group spans 0.85 m of the ramp (0.29 m)
+        terrain_from(lambda x, y: grade * along(x, y)), vehicle=(0.0, 0.0))
+    near = ~flagged(layers, FLAG_FAR)
+    interior = np.zeros(COARSE.shape, bool)
+    interior[1:-1, 1:-1] = True
+    slopes = layers.slope[near & interior]
+    assert slopes == pytest.approx(angle, abs=1e-3)  # centroids: no 2-or-3 cell bias
+    assert not flagged(layers, FLAG_STEP).any()  # a ramp is not a step
+    assert flagged(layers, FLAG_SLOPE)[near & interior].all() == expect
+    if not expect:
+        assert layers.hazard[near].max() == pytest.approx(angle / 20.0, abs=1e-4)
+    # far field: the limit relaxes to 30 degrees
+    assert not flagged(layers, FLAG_SLOPE)[~near].any()
+
+
+def test_a_ditch_seen_from_afar_marks_its_unseen_middle() -> None:
+    """Lip at x = 5, a 2 m wide and 1 m deep trench: the grazing laser sees neither its
+    near wall nor its bottom, only the far wall's upper half (min heights down to
+    -0.5 m) and the ground beyond."""
+    ditch = (5.0, 7.0)
+
+    def ground(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return 0.0 * x
+
+    x, _ = FINE.centres()
+    unseen = (x > ditch[0]) & (x < ditch[1] - 0.2)
+    wall = (x > ditch[1] - 0.2) & (x < ditch[1])
+    terrain = terrain_from(ground, known=~unseen,
+                           lows=lambda x, y: np.where((x > ditch[1] - 0.2) & (x < ditch[1]),
+                                                      -0.5, np.inf))
+    assert wall.any()
+    layers = check_against_reference(terrain)
+    middle = rows_at(ditch[0] + 0.3, ditch[1] - 0.3)
+    assert flagged(layers, FLAG_HOLE)[middle].all()
+    assert np.all(layers.hazard[middle] == 1.0)
+    assert np.all(layers.goodness[middle] > 0.4)
+    # open ground before the lip and beyond the far wall stays easy
+    assert np.all(layers.hazard[rows_at(-4.0, ditch[0] - 0.5)] == 0.0)
+    assert np.all(layers.hazard[rows_at(ditch[1] + 1.0, 8.0)] == 0.0)
+
+
+def test_the_unseen_foot_of_a_down_ledge_is_a_hole() -> None:
+    """Level ground to x = 5, then 1 m lower; the strip at the ledge's foot is unseen."""
+    x, _ = FINE.centres()
+    layers = check_against_reference(terrain_from(
+        lambda x, y: np.where(x > 5.0, -1.0, 0.0), known=~((x > 5.0) & (x < 6.6))))
+    assert flagged(layers, FLAG_HOLE)[rows_at(5.3, 6.4)].all()
+
+
+def test_the_unseen_shadow_behind_a_rock_is_not_a_hole() -> None:
+    """A 0.8 m rock 1 m deep at x = 4..5; the 1.6 m behind it are unseen."""
+    x, y = FINE.centres()
+    rock = (np.abs(y) < 1.0)
+
+    def height(xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
+        return np.where((xx > 4.0) & (xx < 5.0) & (np.abs(yy) < 1.0), 0.8, 0.0)
+
+    layers = check_against_reference(terrain_from(
+        height, known=~((x > 5.0) & (x < 6.6) & rock)))
+    shadow = layers.hazard[rows_at(5.3, 6.4), COARSE.cols // 2 - 1:COARSE.cols // 2 + 1]
+    assert np.isnan(shadow).all()  # unknown, neither free nor a hazard
+    assert not flagged(layers, FLAG_HOLE).any()
+    assert flagged(layers, FLAG_STEP)[rows_at(3.6, 5.0)].any()
+
+
+def test_the_rim_of_a_hole_seen_only_along_its_edge_joins_it() -> None:
+    """As the ditch above, the lip at x = 5.6: the cell [5.5, 6.0) holds one seen row of
+    fine cells (x = 5.5) and two unseen ones over the ditch."""
+    x, _ = FINE.centres()
+    unseen = (x > 5.6) & (x < 7.2)
+    terrain = terrain_from(lambda x, y: 0.0 * x, known=~unseen,
+                           lows=lambda x, y: np.where((x > 7.2) & (x < 7.4), -0.5, np.inf))
+    layers = check_against_reference(terrain)
+    rim = rows_at(5.6, 5.9)
+    assert np.all(layers.count[rim] > 0)  # seen, along an edge
+    assert flagged(layers, FLAG_HOLE)[rim].all() and np.all(layers.hazard[rim] == 1.0)
+    assert np.all(layers.hazard[rows_at(-4.0, 5.4)] == 0.0)  # fully seen ground stays easy
+
+
+def test_a_hole_on_flat_ground_stays_unknown() -> None:
+    x, y = FINE.centres()
+    gap = (np.abs(x - 4.0) < 1.0) & (np.abs(y) < 1.0)  # missing data, no drop
+    layers = check_against_reference(terrain_from(lambda x, y: 0.02 * x, known=~gap))
+    unknown = np.isnan(layers.hazard)
+    assert unknown.sum() >= 9
+    assert np.all(layers.goodness[unknown] == 0.0)
+    assert not flagged(layers, FLAG_HOLE).any()
+
+
+def test_a_seen_ditch_bottom_is_sunken() -> None:
+    """The same trench seen close up: bottom known at -1 m, 2 m wide (4 cells)."""
+    layers = check_against_reference(
+        terrain_from(lambda x, y: np.where((x > 3.0) & (x < 5.0), -1.0, 0.0)))
+    bottom = rows_at(3.3, 4.7)
+    assert np.all(layers.hazard[bottom] == 1.0)
+    assert (flagged(layers, FLAG_SUNKEN) | flagged(layers, FLAG_STEP))[bottom].all()
+    assert flagged(layers, FLAG_SUNKEN)[bottom].any()  # beyond the 8-neighbour step
+
+
+def test_a_wall() -> None:
+    layers = check_against_reference(
+        terrain_from(lambda x, y: np.where((x > 4.0) & (x < 4.4) & (np.abs(y) < 3.0),
+                                           1.2, 0.0)))
+    wall = rows_at(3.9, 4.6)
+    j = slice(COARSE.cols // 2 - 4, COARSE.cols // 2 + 4)
+    assert np.all(layers.hazard[wall, j] == 1.0)
+    assert flagged(layers, FLAG_STEP)[wall, j].all()
+    assert layers.hazard[rows_at(-4.0, 3.0)].max() == 0.0
+
+
+def test_switches() -> None:
+    terrain = terrain_from(lambda x, y: np.where(x >= 3.05, 0.5, 0.0) + 0.5 * y)
+    slope_only = check_against_reference(terrain, HazardRules(step_on=False))
+    assert not flagged(slope_only, FLAG_STEP).any() and flagged(slope_only, FLAG_SLOPE).any()
+    step_only = check_against_reference(terrain, HazardRules(slope_on=False))
+    assert flagged(step_only, FLAG_STEP).any() and not flagged(step_only, FLAG_SLOPE).any()
+    neither = check_against_reference(terrain, HazardRules(step_on=False, slope_on=False))
+    assert np.nanmax(neither.hazard) == 0.0
+
+
+def test_random_rough_terrain_with_holes_and_ages() -> None:
+    rng = np.random.default_rng(42)
+    base = rng.normal(0.0, 0.15, FINE.shape)
+    x, _ = FINE.centres()
+
+    def height(xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
+        i = np.clip(((xx - FINE.origin_x) / 0.2).astype(int), 0, FINE.rows - 1)
+        j = np.clip(((yy - FINE.origin_y) / 0.2).astype(int), 0, FINE.cols - 1)
+        return base[i, j] + 0.05 * xx
+
+    known = rng.random(FINE.shape) > 0.3
+    known[40:55, 20:35] = False  # a hole big enough for the hole rule
+    terrain = terrain_from(height, known=known)
+    terrain = TerrainLayers(terrain.geometry, terrain.elevation, terrain.min_height,
+                            terrain.max_height,
+                            np.where(known, rng.integers(1, 9, FINE.shape), 0).astype(np.int32),
+                            terrain.variance,
+                            np.where(known, rng.uniform(0.0, NOW, FINE.shape), np.nan))
+    for rules in (HazardRules(), HazardRules(step_percent=True, min_points=3, hole_reach=1.0)):
+        layers = check_against_reference(terrain, rules, vehicle=(2.0, -1.0))
+        assert flagged(layers, FLAG_STEP).any() and (layers.hazard < 1).any()
+
+
+def test_resampling_conserves_points_and_extremes() -> None:
+    rng = np.random.default_rng(1)
+    terrain = terrain_from(lambda x, y: np.sin(x) + np.cos(y))
+    terrain = TerrainLayers(terrain.geometry, terrain.elevation, terrain.min_height,
+                            terrain.max_height,
+                            rng.integers(0, 5, FINE.shape).astype(np.int32),
+                            terrain.variance, terrain.last_seen)
+    cells = resample(terrain, COARSE)
+    assert cells.count.sum() == terrain.count.sum()  # the grids cover the same area
+    known = terrain.count > 0
+    assert np.nanmax(cells.max_height) == terrain.max_height[known].max()
+    assert np.nanmin(cells.min_height) == terrain.min_height[known].min()
+
+
+def test_rules_from_table_a7() -> None:
+    rules = HazardRules.from_parameters(TraversabilityMapParameters(), hole_reach=1.5)
+    assert rules == HazardRules(hole_reach=1.5)
+    assert rules.far_slope == 30.0 and rules.far_accuracy == pytest.approx(1 / 1.5)
+    with pytest.raises(ValueError):
+        HazardRules(max_slope=90.0)
+    with pytest.raises(ValueError):
+        TraversabilityMapper(HazardRules()).update(terrain_from(lambda x, y: 0 * x), COARSE,
+                                                   (math.nan, 0.0), NOW)
+
+
+def test_last_seen_tracker_follows_scrolls_and_changes() -> None:
+    tracker = LastSeenTracker()
+    geo = GridGeometry(0.0, 0.0, 0.2, 4, 4)
+    count = np.zeros((4, 4), np.int32)
+    count[1, 1] = count[2, 2] = 3
+    seen = tracker.update(geo, count, 1.0)
+    assert seen[1, 1] == 1.0 and np.isnan(seen[0, 0])
+    # scroll one cell along +x: old [2, 2] is new [1, 2]; old [1, 1] is new [0, 1]
+    moved = GridGeometry(0.2, 0.0, 0.2, 4, 4)
+    count2 = np.zeros((4, 4), np.int32)
+    count2[0, 1] = 3       # unchanged
+    count2[1, 2] = 5       # more points
+    count2[3, 3] = 1       # new
+    seen2 = tracker.update(moved, count2, 2.0)
+    assert seen2[0, 1] == 1.0 and seen2[1, 2] == 2.0 and seen2[3, 3] == 2.0
+    assert np.isnan(seen2[2, 2])

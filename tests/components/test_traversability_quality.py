@@ -1,0 +1,73 @@
+"""Map quality figures (components/traversability_map/quality.py) on hand-made truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from components.terrain_map.grid import GridGeometry
+from components.traversability_map.quality import GroundTruth, assess
+
+# truth: 0.1 m samples over [0, 4) x [0, 4); an obstacle square [1.0, 1.5) x [1.0, 1.5)
+N = 40
+SURFACE = np.zeros((N, N))
+OBSTACLE = np.zeros((N, N), dtype=bool)
+OBSTACLE[10:15, 10:15] = True  # [j, i]: north rows, east columns
+SURFACE[OBSTACLE] = 0.6
+TRUTH = GroundTruth(0.0, 0.0, 0.1, SURFACE, OBSTACLE)
+TRAV = GridGeometry(0.0, 0.0, 0.5, 8, 8)
+
+
+def hazard_with(cells: dict[tuple[int, int], float], fill: float = 0.0) -> np.ndarray:
+    h = np.full(TRAV.shape, fill)
+    for key, value in cells.items():
+        h[key] = value
+    return h
+
+
+def test_detection_and_false_hazards() -> None:
+    # the obstacle is exactly trav cell [2, 2]; its ring is the don't-care margin
+    q = assess(hazard=hazard_with({(2, 2): 1.0, (1, 2): 1.0, (6, 6): 1.0}),
+               hazard_geometry=TRAV, truth=TRUTH, track=[[0.0, 0.0]])
+    assert (q.obstacle_cells, q.detected_cells, q.detection_fraction) == (1, 1, 1.0)
+    assert q.free_observed_cells == 64 - 9
+    assert q.false_hazard_cells == 1  # [6, 6]; [1, 2] lies in the margin
+    assert q.false_hazard_fraction == pytest.approx(1 / 55)
+    assert math.isnan(q.rms_height_error)
+
+
+def test_unknown_is_neither_detected_nor_free_and_range_limits_targets() -> None:
+    h = hazard_with({(2, 2): np.nan, (5, 5): np.nan})
+    q = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[1.0, 1.0]])
+    assert (q.obstacle_cells, q.detected_cells) == (1, 0)
+    assert q.free_observed_cells == 64 - 9 - 1
+    far = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[20.0, 20.0]])
+    assert far.obstacle_cells == 0 and math.isnan(far.detection_fraction)
+    graded = assess(hazard=hazard_with({(2, 2): 0.99}), hazard_geometry=TRAV, truth=TRUTH,
+                    track=[[0.0, 0.0]])
+    assert graded.detected_cells == 0  # below the threshold (1: untraversable)
+
+
+def test_rms_height_error_and_a_rotated_map() -> None:
+    terrain = GridGeometry(0.0, 0.0, 0.2, 20, 20)
+    elevation = np.full(terrain.shape, 0.01)
+    elevation[5:8, 5:8] = 0.5          # the obstacle cells [1.0, 1.6): means of 0.6 and 0
+    count = np.ones(terrain.shape, dtype=np.int32)
+    count[0, 0] = 0
+    q = assess(hazard=hazard_with({}), hazard_geometry=TRAV, truth=TRUTH, track=[[0, 0]],
+               terrain_elevation=elevation, terrain_count=count, terrain_geometry=terrain)
+    assert q.observed_terrain_cells == 399
+    assert q.rms_height_error_ground == pytest.approx(0.01)
+    assert q.rms_height_error > 0.01
+    # the same trav grid as an ego map rotated by 90 degrees about (4, 0)
+    pose = np.eye(4)
+    pose[:2, :2] = [[0.0, -1.0], [1.0, 0.0]]
+    pose[:2, 3] = (4.0, 0.0)
+    rotated = hazard_with({(2, 5): 1.0})  # map x = north, map y = west of east 4
+    q = assess(hazard=rotated, hazard_geometry=TRAV, truth=TRUTH, track=[[0.0, 0.0]],
+               map_pose=pose)
+    assert (q.obstacle_cells, q.detected_cells) == (1, 1)
+    with pytest.raises(ValueError):
+        assess(hazard=np.zeros((2, 2)), hazard_geometry=TRAV, truth=TRUTH, track=[[0, 0]])
