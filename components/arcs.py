@@ -70,6 +70,8 @@ __all__ = [
     "ArcSet",
     "ArcVotes",
     "ArcSetMismatchError",
+    "ARC_SET_SECTION",
+    "arc_set_of",
     "arc_points",
     "arc_point",
     "curvature_for_steering",
@@ -388,3 +390,19 @@ class ArcVotes:
         return ArcVoteIDL(time=time, behaviour=behaviour, curvatures=arcs.curvatures,
                           veto=self.veto, vote=self.vote, certainty=self.certainty,
                           maxSpeed=self.max_speed)
+
+
+#: The configuration section every voting behaviour and the arbiter read the arc set from.
+ARC_SET_SECTION = "CandidateArcs"
+
+
+def arc_set_of(section: object) -> ArcSet:
+    """The arc set a configuration declares in section :data:`ARC_SET_SECTION` (pass
+    ``component.context.section(ARC_SET_SECTION)``); the defaults when there is none.
+    Raises ValueError if the section holds another parameter type."""
+    if section is None:
+        return ArcSet.from_parameters()
+    if not isinstance(section, ArcSetParameters):
+        raise ValueError(f"section {ARC_SET_SECTION} holds {type(section).__name__}, "
+                         "not ArcSetParameters")
+    return ArcSet.from_parameters(section)

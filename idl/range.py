@@ -125,6 +125,11 @@ class Range3dSeqEventIDL(_NodAngles, _RangeHeader):
         _check_sequence(self.points, "Range3dSeqEventIDL")
         return self
 
+    def valid_points(self) -> np.ndarray:
+        """The valid points, ``(n, 3)`` (all of a sequence form's points), so consumers
+        treat both forms alike."""
+        return self.points
+
 
 class Range3dStereoEventIDL(_RangeHeader):
     """One stereo frame, static array form (Table 3): the disparity image as points.
@@ -175,3 +180,7 @@ class Range3dArrayEventIDL(_RangeHeader):
     def _check(self) -> Range3dArrayEventIDL:
         _check_sequence(self.points, "Range3dArrayEventIDL")
         return self
+
+    def valid_points(self) -> np.ndarray:
+        """The valid points, ``(n, 3)`` (all of a sequence form's points)."""
+        return self.points

@@ -47,6 +47,15 @@ class ArcArbiterParameters(Parameters):
         "RaptorMotion", unit="-",
         description="afa addition: name of the Vehicle Control interface whose setVelocity "
                     "the arbiter calls (RaptorCommandConfig's RaptorMotionEvent)")
+    DecisionEventName: str = param(
+        "ArcDecision", unit="-",
+        description="afa addition: name of the ArcDecision events published for displays "
+                    "and logs (the seed's arbiter publishes nothing)")
+    RequiredBehaviours: list[str] = param(
+        [], unit="-",
+        description="afa addition: behaviours without whose fresh vote the vehicle stops "
+                    "(e.g. PurePursuit: Obstacle Avoidance alone must not wander); empty as "
+                    "in the seed")
 
     @property
     def stale_vote_time(self) -> float:

@@ -56,6 +56,10 @@ class ObstacleDetectionParameters(Parameters):
                     "more range sensors')")
     VoteEventName: str = param("ArcVote", unit="-",
                                description="afa addition: name of the ArcVote events published")
+    PlatformName: str = param(
+        "ModelService", unit="-",
+        description="afa addition: name ModelServer's Platform interface is offered under "
+                    "(for the lasers' mounting transforms)")
 
     @model_validator(mode="after")
     def _some_sensor(self) -> ObstacleDetectionParameters:

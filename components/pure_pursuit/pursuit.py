@@ -243,15 +243,24 @@ class PurePursuit:
 
     # --- Table 24 state -------------------------------------------------------------
 
-    def set_waypoints(self, waypoints: Sequence[Waypoint], *, patrol: bool | None = None) -> None:
-        """Replace the list (``setWaypointList``) and seek its first waypoint from where
-        the vehicle is at the next update; ``patrol`` also sets patrol mode if given."""
+    def set_waypoints(self, waypoints: Sequence[Waypoint], *, patrol: bool | None = None,
+                      first: int = 0) -> None:
+        """Replace the list (``setWaypointList``) and seek waypoint ``first`` (0: the
+        first) from where the vehicle is at the next update; ``patrol`` also sets patrol
+        mode if given. Raises ValueError for ``first`` outside the list."""
+        if waypoints and not 0 <= first < len(waypoints):
+            raise ValueError(f"first waypoint {first} is outside the {len(waypoints)} given")
         self._waypoints = tuple(waypoints)
         if patrol is not None:
             self._patrol = patrol
-        self._target = 0
+        self._target = first if waypoints else 0
         self._previous = None
         self._finished = False
+
+    @property
+    def target(self) -> int:
+        """Index of the waypoint sought (meaningful while not finished)."""
+        return self._target
 
     @property
     def waypoints(self) -> tuple[Waypoint, ...]:

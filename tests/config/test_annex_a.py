@@ -21,6 +21,7 @@ from pydantic import ValidationError
 from afa.config.loader import load_configuration
 from afa.config.parameters import Parameters
 from components.arc_arbiter.parameters import ArcArbiterParameters
+from components.arcs import ArcSetParameters
 from components.find_path.parameters import FindPathParameters
 from components.global_map.parameters import GlobalMapParameters
 from components.gps_sokkia.parameters import GpsSokkiaParameters
@@ -235,6 +236,7 @@ TABLES: list[tuple[str, type[Parameters], str, str, str, list[tuple[str, Any, An
 NO_TABLE: list[tuple[type[Parameters], str, str]] = [
     (GlobalMapParameters, "Raptor::GlobalMapParameters", "GlobalMapConfig"),
     (PurePursuitParameters, "Raptor::PurePursuitParameters", "PurePursuit"),
+    (ArcSetParameters, "Raptor::ArcSetParameters", "CandidateArcs"),
 ]
 NESTED_SEED_FIELDS = {
     TraversabilityMapParameters: set(A7_DESCRIPTIONS),

@@ -172,7 +172,7 @@ def test_unimplemented_components_are_reported_and_strict_refuses_them():
 
     system = System.from_xml(RAPTOR)
     reported = " ".join(system.notes)
-    assert "arcArbiter (ArcArbiter) is configured but not implemented yet" in reported
-    assert "arcArbiter" not in system.components
+    assert "TerrainService (TerrainMap) is configured but not implemented yet" in reported
+    assert "TerrainService" not in system.components
     with pytest.raises(ConfigError, match="not implemented yet"):
         System.from_xml(RAPTOR, strict=True)

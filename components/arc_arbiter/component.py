@@ -1,0 +1,133 @@
+"""The Arc Arbiter (seed §3.4, Tables 25, A.12): the one decision-making component.
+
+It keeps the latest ``ArcVote`` of each behaviour and re-decides on every vote
+(:mod:`components.arc_arbiter.arbitrate`): arcs vetoed by any fresh vote are out, the
+rest are scored by the weighted sum of votes scaled by certainty, and the speed is the
+least of the chosen arc's ``maxSpeed`` over the fresh votes and
+``TransVelocitySetPoint``. It commands Vehicle Control through the polled
+``setVelocity`` (which Vehicle Control obeys only while its arbiter switch is on).
+
+Fail-safe: every arc vetoed, no valid vote, or every vote stale (older than
+``StaleVoteTimeSec`` + ``StaleVoteTimeUSec``) means stop. Staleness is checked on a
+timer as well as on each vote, so a behaviour that stops voting loses its veto (and its
+say) when its vote goes stale, and an arbiter whose voters all fell silent stops the
+vehicle within 100 ms of the last vote going stale. If the arbiter itself falls silent,
+Vehicle Control's command watchdog stops the vehicle.
+
+Commands go out when the decision changes and at least every ``COMMAND_REFRESH`` seconds
+(feeding Vehicle Control's watchdog), one at a time and always the latest decision. The
+decision is published as ``ArcDecision`` (:class:`~idl.planning.ArcDecisionIDL`) for the
+console and the logs, when it changes and at least every ``COMMAND_REFRESH`` seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from afa import Event, SubscribePublishServer
+from afa.errors import AfaError
+from components.arc_arbiter.arbitrate import ArbiterDecision, VoteArbiter
+from components.arc_arbiter.parameters import ArcArbiterParameters
+from components.arcs import ARC_SET_SECTION, ArcSet, ArcSetMismatchError, arc_set_of
+from idl import ArcDecisionIDL, ArcVoteIDL, TimeIDL, VehicleControl, VelocityIDL
+
+__all__ = ["ArcArbiter", "STALE_CHECK_PERIOD", "COMMAND_REFRESH"]
+
+#: How often staleness is checked without a vote (s).
+STALE_CHECK_PERIOD = 0.1
+#: A command (and a decision event) goes out at least this often (s): below Vehicle
+#: Control's 0.5 s command watchdog.
+COMMAND_REFRESH = 0.2
+
+
+class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
+    """The Arc Arbiter (module docstring)."""
+
+    def __init__(self, name: str, parameters: ArcArbiterParameters | None = None) -> None:
+        super().__init__(name, parameters)
+        p = self.parameters
+        self.subscribes(p.VoteEventName, ArcVoteIDL, self._on_vote, maxsize=64)
+        self.decisions = self.publishes(p.DecisionEventName, ArcDecisionIDL)
+        self.control = self.uses(VehicleControl, p.VehicleControlName)
+        self.arcs = ArcSet.from_parameters()
+        self.book = VoteArbiter(p, self.arcs, required=p.RequiredBehaviours)
+        self.decision: ArbiterDecision | None = None
+        self._sent: tuple[int, float, float] | None = None  # index, speed, steering
+        self._sent_at = -1e9
+        self._published: tuple[int, float, str] | None = None
+        self._published_at = -1e9
+        self._lock = asyncio.Lock()
+        self.counters = {"votes": 0, "decisions": 0, "commands": 0, "command_errors": 0,
+                         "failsafe_stops": 0, "rejected_votes": 0}
+
+    async def setup(self) -> None:
+        self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
+        self.book = VoteArbiter(self.parameters, self.arcs,
+                                required=self.parameters.RequiredBehaviours)
+        self._sent = self._published = None
+
+    async def run(self) -> None:
+        async for _ in self.clock.periodic(STALE_CHECK_PERIOD):
+            await self._decide()
+
+    async def _on_vote(self, event: Event) -> None:
+        vote: ArcVoteIDL = event.body  # type: ignore[assignment]
+        try:
+            self.book.receive(vote, self.clock.monotonic())
+        except ArcSetMismatchError as exc:
+            self.counters["rejected_votes"] += 1
+            self.set_health(False, f"vote from {vote.behaviour} refused: {exc}")
+            return
+        self.counters["votes"] += 1
+        await self._decide()
+
+    async def _decide(self) -> None:
+        now = self.clock.monotonic()
+        decision = self.book.decide(now)
+        self.decision = decision
+        self.counters["decisions"] += 1
+        key = (decision.index, decision.speed, decision.steering)
+        if key != self._sent or now - self._sent_at >= COMMAND_REFRESH:
+            if decision.failsafe is not None and (self._sent is None or self._sent[1] > 0):
+                self.counters["failsafe_stops"] += 1
+            self._sent, self._sent_at = key, now
+            await self._command(decision)
+        shown = (decision.index, decision.speed, decision.failsafe or "")
+        if shown != self._published or now - self._published_at >= COMMAND_REFRESH:
+            self._published, self._published_at = shown, now
+            self._publish(decision)
+
+    async def _command(self, decision: ArbiterDecision) -> None:
+        """One setVelocity at a time; a later decision waits for the earlier call."""
+        velocity = VelocityIDL(translation=decision.speed,
+                               rotation=decision.speed * decision.curvature,
+                               steeringAngle=decision.steering)
+        async with self._lock:
+            if self.decision is not decision and self.decision is not None:
+                return  # superseded while waiting: the newer one is on its way
+            try:
+                await self.control.setVelocity(velocity)
+            except AfaError as exc:  # the link is down, or Vehicle Control is restarting
+                self.counters["command_errors"] += 1
+                self.set_health(False, f"setVelocity failed: {exc}")
+                return
+        self.counters["commands"] += 1
+        if not self.health().healthy and self._health_detail.startswith("setVelocity"):
+            self.set_health(True, "commanding")
+
+    def _publish(self, decision: ArbiterDecision) -> None:
+        self.decisions.publish(ArcDecisionIDL(
+            time=TimeIDL.from_seconds(self.clock.now()), curvatures=self.arcs.curvatures,
+            scores=decision.scores, vetoed=decision.vetoed, index=decision.index,
+            curvature=decision.curvature, steeringAngle=decision.steering,
+            speed=decision.speed, fresh=decision.fresh, stale=decision.stale,
+            unknown=decision.unknown, failsafe=decision.failsafe or ""))
+
+    def statistics(self) -> dict[str, Any]:
+        stats = super().statistics()
+        stats.update(self.counters)
+        if self.decision is not None:
+            stats["failsafe"] = self.decision.failsafe
+            stats["speed"] = self.decision.speed
+        return stats
