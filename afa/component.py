@@ -292,7 +292,9 @@ class Component(Generic[P]):
         """Report the component (un)healthy, e.g. while its device is lost."""
         if healthy != self._healthy or detail != self._health_detail:
             self._healthy, self._health_detail = healthy, detail
-            log = self.log.info if healthy else self.log.warning
+            # coming up (opening, waiting for the first message) is routine; a loss after
+            # the component was healthy is what an operator must see
+            log = self.log.warning if not healthy and self._ever_healthy else self.log.info
             log("%s", f"{self.name}: healthy {detail}".strip() if healthy
                 else f"{self.name}: unhealthy: {detail}")
         self._note_health()
@@ -352,7 +354,7 @@ class Component(Generic[P]):
                         join_name(self.robot, served.name),
                         Servant(served.interface, served.impl, name=join_name(
                             self.robot, served.name), logger=self.log), owner=self)
-                self._started()
+                self._on_ports_open()
                 self._set_state(State.RUNNING)
                 await self.run()
                 await _Forever()
@@ -366,7 +368,7 @@ class Component(Generic[P]):
                 self._set_state(State.STOPPING)
             await self._release()
 
-    def _started(self) -> None:
+    def _on_ports_open(self) -> None:
         """Called after setup with the ports open (the PSR base starts its reactor)."""
 
     async def _deliver(self, port: Input) -> None:
@@ -481,7 +483,7 @@ class PublishServerReactor(Component[P], Generic[P, M]):
             raise EDevIO(f"{self.name}: not started")
         await self.reactor.send(data)
 
-    def _started(self) -> None:
+    def _on_ports_open(self) -> None:
         spec = self.device()
         devices = self.context.devices
         self.set_health(False, "opening the device")  # healthy once the device has spoken

@@ -116,8 +116,8 @@ class Subscription:
     channel) is closed. :meth:`get` raises :class:`~afa.errors.ChannelClosed` then.
     """
 
-    __slots__ = ("domain", "type", "maxsize", "policy", "_channel", "_queue", "_waiter",
-                 "_closed", "_delivered", "_dropped", "_high_water", "_order")
+    __slots__ = ("domain", "type", "maxsize", "policy", "observer", "_channel", "_queue",
+                 "_waiter", "_closed", "_delivered", "_dropped", "_high_water", "_order")
 
     def __init__(self, channel: EventChannel, domain: str, type: str, maxsize: int,
                  policy: Overflow, order: int) -> None:
@@ -127,6 +127,7 @@ class Subscription:
         self.type = type
         self.maxsize = maxsize
         self.policy = Overflow(policy)
+        self.observer = False  # watches everything; asks for nothing (EventChannel.observe)
         self._channel = channel
         self._queue: deque[Event] = deque()
         self._waiter: asyncio.Future[None] | None = None
@@ -222,8 +223,10 @@ class Publisher:
 
     @property
     def subscribed(self) -> bool:
-        """True when at least one subscription would receive this event."""
-        return bool(self._current_targets())
+        """True when a subscriber (not merely an observer) would receive this event: a
+        supplier builds an optional form (a laser's static array) only for someone who
+        asked for it; observers see what is published, they do not ask."""
+        return any(not s.observer for s in self._current_targets())
 
     def _current_targets(self) -> tuple[Subscription, ...]:
         if self._version != self._channel._version:
@@ -273,7 +276,9 @@ class EventChannel:
         recorders, the console, bridges): its own bounded buffer, statistics and
         isolation. The observer reads it in its own task; a full buffer drops and
         counts, it never slows the publisher."""
-        return self.subscribe("*", "*", maxsize=maxsize, policy=policy)
+        subscription = self.subscribe("*", "*", maxsize=maxsize, policy=policy)
+        subscription.observer = True
+        return subscription
 
     # -- suppliers -------------------------------------------------------------------
     def offer(self, domain: str, type: str) -> Publisher:
@@ -298,8 +303,8 @@ class EventChannel:
                              event.origin, event.time)
 
     def subscribed(self, domain: str, type: str) -> bool:
-        """Whether anyone subscribes to ``(domain, type)``."""
-        return bool(self._match(domain, type))
+        """Whether a subscriber (not merely an observer) wants ``(domain, type)``."""
+        return any(not s.observer for s in self._match(domain, type))
 
     def offers(self) -> list[tuple[str, str]]:
         """Every (domain, type) a supplier has offered."""

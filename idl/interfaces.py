@@ -284,7 +284,15 @@ class GlobalMap(Interface):
         ...
 
     async def getPlanMap(self) -> PlanMapEventIDL:
-        """The whole planning map at once (afa addition: saves per-node polls)."""
+        """The whole planning map at once (afa addition: saves per-node polls;
+        docs/decisions/0009)."""
+        ...
+
+    async def getPlanMapChanges(self, revision: int) -> PlanMapEventIDL | None:
+        """The smallest window holding every cell changed since ``revision`` (the whole
+        map if that revision is older than the change log or unknown); None (Miro's
+        false) if nothing changed. afa addition for FindPath's incremental replanning
+        (docs/decisions/0009)."""
         ...
 
 

@@ -267,6 +267,20 @@ class PlanMapEventIDL(_TravArray):
     sensedCost: Grid32 = field(unit="1", description="sensed cost per cell, ≥ 1 or inf")
     planningBoundary: PlanningBoundaryIDL = field(unit="", description="the searchable "
                                                                        "part of the grid")
+    revision: int = field(0, unit="1", ge=0,
+                          description="the Global Map's revision these layers show (it "
+                                      "counts changes); see GlobalMap.getPlanMapChanges")
+    fullRows: int = field(0, unit="1", ge=0,
+                          description="rows of the whole planning grid (0: this is the "
+                                      "whole grid); a window's row i is grid row "
+                                      "i + (originX - gridOriginX) / gridsize")
+    fullCols: int = field(0, unit="1", ge=0,
+                          description="columns of the whole planning grid (0: whole grid)")
+
+    def planning_cost(self) -> np.ndarray:
+        """The cost a planner uses per cell: the sensed cost where the cell was sensed
+        (hazard known), else the a priori cost (``PlanPointIDL.cost``)."""
+        return np.where(np.isnan(self.hazard), self.aPrioriCost, self.sensedCost)
 
     @model_validator(mode="after")
     def _check_costs(self) -> PlanMapEventIDL:

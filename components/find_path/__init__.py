@@ -1,8 +1,6 @@
-"""FindPath (seed §3.3.1): D* Lite planning over the Global Map."""
+"""FindPath (seed §3.3.1): D* Lite over the Global Map, tracked by arc votes."""
 
-from afa.registry import not_implemented
+from components.find_path.component import FindPath
 from components.find_path.parameters import FindPathParameters
-
-FindPath = not_implemented("FindPath", FindPathParameters, "FindPath: the planning capability")
 
 __all__ = ["FindPath", "FindPathParameters"]

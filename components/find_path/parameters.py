@@ -48,6 +48,24 @@ class FindPathParameters(Parameters):
                     "resolved in the naming service")
     VoteEventName: str = param("ArcVote", unit="-",
                                description="afa addition: name of the ArcVote events published")
+    PathEventName: str = param(
+        "PlannedPath", unit="-",
+        description="afa addition: name of the PlannedPath events published for displays")
+    PlatformName: str = param(
+        "ModelService", unit="-",
+        description="afa addition: name ModelServer's Platform interface is offered under "
+                    "(polled for the vehicle pose)")
+    InflationRadius: Annotated[float, Field(ge=0)] = param(
+        1.5, unit="cells",
+        description="afa addition: impassable cells are grown by this many planning cells "
+                    "(the vehicle's half width, 0.7 m, at 0.5 m cells), so a path for the "
+                    "rear axle keeps the body clear")
+    MarginRadius: Annotated[float, Field(ge=0)] = param(
+        3.0, unit="cells",
+        description="afa addition: cells this close to an impassable cell cost at least "
+                    "MarginCost, so paths keep a little distance where they can")
+    MarginCost: Annotated[float, Field(ge=1)] = param(
+        3.0, unit="1", description="afa addition: the least cost of a margin cell")
 
     @model_validator(mode="after")
     def _lookahead_range(self) -> FindPathParameters:

@@ -1,8 +1,6 @@
-"""Global Map (seed §3.2.3): cumulative traversability, Table 18 planning interface."""
+"""Global Map (seed §3.2.3): the cumulative planning map and Table 18's interface."""
 
-from afa.registry import not_implemented
+from components.global_map.component import GlobalMap
 from components.global_map.parameters import GlobalMapParameters
-
-GlobalMap = not_implemented("GlobalMap", GlobalMapParameters, "Global Map: the maps capability")
 
 __all__ = ["GlobalMap", "GlobalMapParameters"]

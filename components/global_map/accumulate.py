@@ -84,6 +84,16 @@ class CostMapping:
         result: FloatArray = np.where(np.isnan(h), self.unknown, cost)
         return result
 
+    def hazard_of(self, cost: ArrayLike) -> FloatArray:
+        """The hazard whose cost is ``cost`` (the inverse of the mapping; inf → 1)."""
+        c = np.asarray(cost, dtype=np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            share = np.clip((c - 1.0) / (self.max_cost - 1.0), 0.0, 1.0) \
+                if self.max_cost > 1.0 else np.zeros_like(c)
+            hazard = share ** (1.0 / self.exponent) * min(self.lethal, 1.0)
+        result: FloatArray = np.where(np.isinf(c), 1.0, np.minimum(hazard, 0.999999))
+        return result
+
 
 @dataclass(frozen=True)
 class Region:
@@ -241,6 +251,27 @@ class PlanningGrid:
         ii, jj, cc = ii[inside], jj[inside], cc[inside]
         old = self.cost_at(ii, jj)
         self.a_priori[ii, jj] = cc
+        return self._change(ii, jj, old, ii, jj, outside=int((~inside).sum()))
+
+    def set_sensed(self, i: ArrayLike, j: ArrayLike, cost: ArrayLike, time: float) -> MapChange:
+        """Set the sensed cost of cells (i, j) directly (an operator's correction, seed
+        Table 18 ``setSensingMap``), as a full-goodness observation at ``time``: the
+        stored hazard becomes the one whose cost this is. Cells outside are skipped.
+        Raises ValueError for a cost below 1 or NaN."""
+        ii, jj, cc = np.broadcast_arrays(np.asarray(i, dtype=np.intp),
+                                         np.asarray(j, dtype=np.intp),
+                                         np.asarray(cost, dtype=np.float64))
+        ii, jj, cc = ii.ravel(), jj.ravel(), cc.ravel()
+        if not np.all(cc >= 1.0):
+            raise ValueError("sensed costs must be >= 1 or inf")
+        inside = self.contains(ii, jj)
+        ii, jj, cc = ii[inside], jj[inside], cc[inside]
+        old = self.cost_at(ii, jj)
+        self.sensed_cost[ii, jj] = cc
+        self.hazard[ii, jj] = self.cost_mapping.hazard_of(cc)
+        self.goodness[ii, jj] = 1.0
+        self.stamp[ii, jj] = time
+        self.sensed[ii, jj] = True
         return self._change(ii, jj, old, ii, jj, outside=int((~inside).sum()))
 
     # ------------------------------------------------------------------ merging

@@ -71,6 +71,15 @@ class ObstacleAvoidanceParameters(Parameters):
         description="afa addition: subscribed traversability map event name")
     VoteEventName: str = param("ArcVote", unit="-",
                                description="afa addition: name of the ArcVote events published")
+    PlatformName: str = param(
+        "ModelService", unit="-",
+        description="afa addition: name ModelServer's Platform interface is offered under "
+                    "(for the ego map frame's place on the vehicle)")
+    DiscOffsets: tuple[float, ...] = param(
+        (0.0, 0.8, 1.6, 2.4), unit="m",
+        description="afa addition: where along the body (m ahead of the rear axle) a disc "
+                    "of VehicleRadius is swept along each arc; together they cover the "
+                    "body from the rear axle to the front bumper")
 
     @model_validator(mode="after")
     def _ranges(self) -> ObstacleAvoidanceParameters:

@@ -67,10 +67,17 @@ class TerrainMapParameters(Parameters):
     StereoPeriod: Annotated[float, Field(gt=0)] = param(
         0.5, unit="s",
         description="Stereo Event Rate, sec. Used to equal Stereo and Laser data densities")
+    EgoDepth: Annotated[int, Field(gt=0)] = param(
+        16000, unit="mm",
+        description="afa addition: depth of the egocentric map ahead of the GroundFrame, mm "
+                    "(Table A.7's EgoTerrainMapDescription)")
+    EgoWidth: Annotated[int, Field(gt=0)] = param(
+        16000, unit="mm",
+        description="afa addition: width of the egocentric map, mm, centred left-right")
 
     @model_validator(mode="after")
     def _whole_cells(self) -> TerrainMapParameters:
-        for name in ("Depth", "Width"):
+        for name in ("Depth", "Width", "EgoDepth", "EgoWidth"):
             if getattr(self, name) % self.Gridsize:
                 raise ValueError(f"{name} ({getattr(self, name)} mm) is not a whole number "
                                  f"of Gridsize ({self.Gridsize} mm) cells")

@@ -53,7 +53,8 @@ class TraversabilityMapParameters(Parameters):
                                 description="Calculate Step Hazard as a percentage")
     Stepheight: Annotated[float, Field(gt=0)] = param(
         300.0, unit="mm",
-        description="Step hazard height (mm; a percentage when StepPercent is 1)")
+        description="Step hazard height (mm); with StepPercent 1 the step hazard is graded "
+                    "as a percentage of it, min(1, step / Stepheight), instead of 0 or 1")
     Maxslope: Annotated[float, Field(gt=0, lt=90)] = param(
         20.0, unit="deg", description="Slope hazard angle")
     ChannelName: str = param("EventChannel", unit="-", description="EventChannel name")

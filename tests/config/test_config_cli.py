@@ -167,12 +167,27 @@ def test_an_unknown_component_type_lists_the_known_ones(tmp_path):
     assert "Stereo" in message and "GpsSokkia" in message  # the known types are listed
 
 
-def test_unimplemented_components_are_reported_and_strict_refuses_them():
-    from afa import System
+def test_unimplemented_components_are_reported_and_strict_refuses_them(tmp_path):
+    """A component type declared before it is written (registry.not_implemented) lets
+    a configuration validate; run reports it, --strict refuses it."""
+    from afa import System, registry
+    from components.arcs import ArcSetParameters
 
-    system = System.from_xml(RAPTOR)
-    reported = " ".join(system.notes)
-    assert "TerrainService (TerrainMap) is configured but not implemented yet" in reported
-    assert "TerrainService" not in system.components
-    with pytest.raises(ConfigError, match="not implemented yet"):
-        System.from_xml(RAPTOR, strict=True)
+    registry.register("FutureThing", registry.not_implemented(
+        "FutureThing", ArcSetParameters, "a capability not written yet"))
+    entry = ('<parameter><parameter name="Name" value="futureThing"/>'
+             '<parameter name="Type" value="FutureThing"/></parameter>')
+    text = RAPTOR.read_text().replace(
+        '<parameter name="Components">', '<parameter name="Components">' + entry, 1)
+    config = tmp_path / "raptor.xml"
+    config.write_text(text.replace('value="050917raptor01.XML"',
+                                   f'value="{RAPTOR.parent / "050917raptor01.XML"}"'))
+    try:
+        system = System.from_xml(config)
+        reported = " ".join(system.notes)
+        assert "futureThing (FutureThing) is configured but not implemented yet" in reported
+        assert "futureThing" not in system.components
+        with pytest.raises(ConfigError, match="not implemented yet"):
+            System.from_xml(config, strict=True)
+    finally:
+        registry._registered.pop("FutureThing", None)

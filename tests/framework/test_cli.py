@@ -25,12 +25,12 @@ def test_run_reports_what_is_not_implemented_and_stops_cleanly(tmp_path):
     # addresses, which the real-device mode would
     summary = tmp_path / "summary.json"
     result = subprocess.run(
-        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--sim", "--fast", "--duration", "3",
+        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--sim", "--fast", "--duration", "10",
          "--summary", str(summary)],
         capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     data = json.loads(summary.read_text())
-    assert data["sim_time_s"] >= 3.0
+    assert data["sim_time_s"] >= 10.0  # the maps publish after MapUpdateTime (7 s)
     assert data["stack_up"] is True  # every started component was healthy at some point
     for key in ("wall_time_s", "realtime_factor", "events", "events_dropped",
                 "component_errors", "components", "not_started"):

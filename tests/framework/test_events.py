@@ -178,3 +178,16 @@ def _drain(sub):
     while (event := sub.get_nowait()) is not None:
         out.append(event)
     return out
+
+
+def test_observers_see_everything_but_ask_for_no_optional_form():
+    channel = EventChannel()
+    publisher = channel.offer("Raptor", "Laser11Array")
+    observer = channel.observe()
+    assert not publisher.subscribed and not channel.subscribed("Raptor", "Laser11Array")
+    channel.publish("Raptor", "Laser11Array", Sample(value=1))
+    assert len(_drain(observer)) == 1  # it still sees what is published
+    wanted = channel.subscribe("Raptor", "Laser1*")
+    assert publisher.subscribed and channel.subscribed("Raptor", "Laser11Array")
+    wanted.close()
+    assert not publisher.subscribed

@@ -422,7 +422,7 @@ SEED_METHODS: dict[type[Interface], list[str]] = {
         "getMap", "setMap", "getTransformToPlanningFromWorld",
         "getTransformToWorldFromPlanning", "getVehiclePosition", "getNextWaypoint",
         "setWaypointList", "getWaypointList", "getCurrentWaypoint", "setPlanningBoundary",
-        "getPlanningBoundary", "getPlanMap"],
+        "getPlanningBoundary", "getPlanMap", "getPlanMapChanges"],
     idl.Platform: ["getTransformation", "getBodyList", "getBodyFrameList",  # Table 19
                    "getPose", "getWaitPose"],
     idl.VehiclePlan: ["setWaypointList", "getWaypointList", "getCurrentWaypoint",

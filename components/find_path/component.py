@@ -1,0 +1,314 @@
+"""FindPath (seed §3.3.1, Tables 22, A.9): D* Lite over the Global Map, and path tracking
+by arc votes.
+
+FindPath subscribes to nothing (Table 22): it polls. After ``PlanUpdateDelayTime`` it
+runs one cycle every ``PlanEventInterval`` seconds:
+
+1. the vehicle pose from ModelServer (``getPose``), the current waypoint from the Global
+   Map (``getCurrentWaypoint``);
+2. the planning map in bulk (decision 0009): the whole map once (``getPlanMap``), then
+   only the window changed since the revision it holds (``getPlanMapChanges``);
+3. its own cost grid: the map's planning cost (sensed where sensed, else a priori;
+   unknown cells cost ``UnknownCellCost``, the free-space assumption), with impassable
+   cells grown by the vehicle's half width (``InflationRadius``) and a soft margin around
+   them (``MarginRadius`` at ``MarginCost``), so a path for the rear axle keeps the body
+   clear; cells outside the planning boundary are impassable;
+4. D* Lite (:mod:`components.find_path.dstar_lite`): the changed cells update the search
+   incrementally, the start moves with the vehicle, and the repair stops at an expansion
+   budget beyond which an exact from-scratch plan is cheaper. If the vehicle is more than
+   ``TrackingTolerance`` cells from the path it was following, the plan is rebuilt from
+   scratch, as the seed's "forced to re-plan";
+5. tracking: the look-ahead point is the farthest point of the path between
+   ``MinLookahead`` and ``MaxLookahead`` cells along it to which the path runs nearly
+   straight (within half a cell); the vote is a Gaussian around the curvature that
+   reaches it (κ = 2y/D²), published as an ``ArcVote`` (behaviour ``FindPath``), and
+   the path as ``PlannedPath`` for displays. With no path (no route, the goal impassable
+   and no free cell within its tolerance, or the vehicle off the map) the vote vetoes
+   every arc, as the seed says.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from afa import SubscribePublishServer
+from afa.diagnostics import Stopwatch
+from afa.errors import AfaError
+from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
+from components.find_path.dstar_lite import DStarLite, PlanStatus
+from components.find_path.parameters import FindPathParameters
+from components.pure_pursuit.pursuit import gaussian_votes, pursuit_curvature, to_vehicle_frame
+from components.waypoints import to_local
+from idl import ArcVoteIDL, PlanMapEventIDL, PlannedPathIDL, Platform, TimeIDL, WaypointIDL
+from idl import GlobalMap as GlobalMapInterface
+
+__all__ = ["FindPath", "BEHAVIOUR", "CostGrid"]
+
+BEHAVIOUR = "FindPath"
+
+
+class CostGrid:
+    """FindPath's copy of the planning map with obstacles grown for the vehicle's size.
+
+    ``raw`` is the map's planning cost; ``cost`` what D* Lite plans on: inf within
+    ``inflation`` cells of an impassable cell, at least ``margin_cost`` within ``margin``
+    cells, ``raw`` elsewhere; cells outside the planning boundary are impassable.
+    """
+
+    def __init__(self, plan: PlanMapEventIDL, inflation: float, margin: float,
+                 margin_cost: float) -> None:
+        self.gridsize = plan.gridsize
+        self.origin = (plan.originX, plan.originY)
+        self.initial_utm = np.array(plan.initialUTM)
+        self.revision = plan.revision
+        self.inflation, self.margin, self.margin_cost = inflation, margin, margin_cost
+        self.raw = plan.planning_cost().astype(np.float64)
+        b = plan.planningBoundary
+        self.inside = np.zeros(self.raw.shape, dtype=bool)
+        self.inside[b.minX:b.maxX + 1, b.minY:b.maxY + 1] = True
+        self.cost = self._grow(self.raw, self.inside)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.raw.shape  # type: ignore[return-value]
+
+    def _grow(self, raw: np.ndarray, inside: np.ndarray) -> np.ndarray:
+        blocked = ~np.isfinite(raw) | ~inside
+        if not blocked.any():
+            return raw.copy()
+        distance = ndimage.distance_transform_edt(~blocked)
+        cost = np.where(distance <= self.margin, np.maximum(raw, self.margin_cost), raw)
+        cost[distance <= self.inflation] = np.inf
+        return cost
+
+    def apply(self, window: PlanMapEventIDL) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Take in a changed window (or a whole map); returns the cells whose grown cost
+        changed and their new costs."""
+        g = self.gridsize
+        i0 = int(round((window.originX - self.origin[0]) / g))
+        j0 = int(round((window.originY - self.origin[1]) / g))
+        rows, cols = window.rows, window.cols
+        self.raw[i0:i0 + rows, j0:j0 + cols] = window.planning_cost()
+        self.revision = window.revision
+        self.initial_utm = np.array(window.initialUTM)
+        # the grown cost of a cell depends on raw cells up to `margin` away
+        reach = int(math.ceil(self.margin)) + 1
+        a0, b0 = max(0, i0 - reach), max(0, j0 - reach)
+        a1, b1 = min(self.shape[0], i0 + rows + reach), min(self.shape[1], j0 + cols + reach)
+        c0, d0 = max(0, a0 - reach), max(0, b0 - reach)
+        c1, d1 = min(self.shape[0], a1 + reach), min(self.shape[1], b1 + reach)
+        grown = self._grow(self.raw[c0:c1, d0:d1], self.inside[c0:c1, d0:d1])
+        grown = grown[a0 - c0:a1 - c0, b0 - d0:b1 - d0]
+        old = self.cost[a0:a1, b0:b1]
+        changed = ~((old == grown) | (np.isinf(old) & np.isinf(grown)))
+        xs, ys = np.nonzero(changed)
+        new = grown[xs, ys]
+        self.cost[a0:a1, b0:b1] = grown
+        return xs + a0, ys + b0, new
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
+        i = int(math.floor((x - self.origin[0]) / self.gridsize))
+        j = int(math.floor((y - self.origin[1]) / self.gridsize))
+        if 0 <= i < self.shape[0] and 0 <= j < self.shape[1]:
+            return i, j
+        return None
+
+    def centre(self, cell: tuple[int, int]) -> tuple[float, float]:
+        return (self.origin[0] + (cell[0] + 0.5) * self.gridsize,
+                self.origin[1] + (cell[1] + 0.5) * self.gridsize)
+
+    def free_near(self, cell: tuple[int, int], radius: float) -> tuple[int, int] | None:
+        """The passable cell nearest ``cell`` within ``radius`` cells (``cell`` itself if
+        passable)."""
+        if math.isfinite(self.cost[cell]):
+            return cell
+        r = int(math.ceil(radius))
+        i0, j0 = max(0, cell[0] - r), max(0, cell[1] - r)
+        block = self.cost[i0:cell[0] + r + 1, j0:cell[1] + r + 1]
+        xs, ys = np.nonzero(np.isfinite(block))
+        if not len(xs):
+            return None
+        d = np.hypot(xs + i0 - cell[0], ys + j0 - cell[1])
+        k = int(np.argmin(d))
+        if d[k] > radius:
+            return None
+        return int(xs[k] + i0), int(ys[k] + j0)
+
+
+class FindPath(SubscribePublishServer[FindPathParameters]):
+    """FindPath (module docstring). The seed files it under PSR (its "reactor" is the
+    planning timer); it polls and publishes, so it is written as a server here."""
+
+    def __init__(self, name: str, parameters: FindPathParameters | None = None) -> None:
+        super().__init__(name, parameters)
+        p = self.parameters
+        self.votes = self.publishes(p.VoteEventName, ArcVoteIDL)
+        self.paths = self.publishes(p.PathEventName, PlannedPathIDL)
+        self.global_map = self.uses(GlobalMapInterface, p.GlobalMapName)
+        self.platform = self.uses(Platform, p.PlatformName)
+        self.arcs = ArcSet.from_parameters()
+        self.grid: CostGrid | None = None
+        self.planner: DStarLite | None = None
+        self.goal: tuple[int, int] | None = None
+        self.path: list[tuple[int, int]] = []
+        self.plan_times: list[float] = []
+        self.counters = {"cycles": 0, "plans": 0, "replans": 0, "tracking_replans": 0,
+                         "no_path": 0, "cells_updated": 0, "poll_errors": 0}
+
+    async def setup(self) -> None:
+        self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
+        self.grid = self.planner = None
+        self.goal = None
+        self.path = []
+
+    async def run(self) -> None:
+        p = self.parameters
+        await self.bound(self.global_map)
+        await self.bound(self.platform)
+        await self.clock.sleep(p.PlanUpdateDelayTime)
+        async for _ in self.clock.periodic(p.PlanEventInterval):
+            try:
+                await self._cycle()
+            except AfaError as exc:  # a server restarting: the next cycle tries again
+                self.counters["poll_errors"] += 1
+                self.log.info("%s: planning cycle skipped: %s", self.name, exc)
+
+    async def _cycle(self) -> None:
+        self.counters["cycles"] += 1
+        waypoint = await self.global_map.getCurrentWaypoint()
+        if waypoint is None:
+            return  # no mission, or finished: FindPath has no opinion
+        pose = await self.platform.getPose()
+        grid = await self._map()
+        x, y = float(pose.HTransform[0, 3]), float(pose.HTransform[1, 3])
+        yaw = math.atan2(float(pose.HTransform[1, 0]), float(pose.HTransform[0, 0]))
+        start = grid.cell_of(x, y)
+        goal = self._goal_cell(grid, waypoint)
+        if start is None or goal is None:
+            self._no_path()
+            return
+        with Stopwatch() as watch:  # processing time, for statistics only
+            status = self._plan(grid, start, goal)
+        self.plan_times.append(watch.seconds)
+        del self.plan_times[:-1000]
+        if status is not PlanStatus.DONE or self.planner is None:
+            self._no_path()
+            return
+        self.path = self.planner.path()
+        point = self._lookahead(grid, (x, y))
+        ahead, left = to_vehicle_frame(point[0], point[1], x, y, yaw)
+        kappa = pursuit_curvature(ahead, left, self.arcs.max_curvature)
+        n = len(self.arcs)
+        sigma = 2.0 * 1.0 / max(math.hypot(ahead, left), 1.0) ** 2  # a 1 m miss, as pursuit
+        votes = ArcVotes(np.zeros(n, dtype=bool),
+                         gaussian_votes(self.arcs.curvatures, kappa, sigma), np.ones(n),
+                         np.full(n, 2.0))
+        stamp = TimeIDL.from_seconds(self.clock.now())
+        self.votes.publish(votes.to_idl(time=stamp, behaviour=BEHAVIOUR, arcs=self.arcs))
+        centres = np.array([grid.centre(c) for c in self.path], dtype=np.float64)
+        self.paths.publish(PlannedPathIDL(time=stamp, points=centres.reshape(-1, 2),
+                                          initialUTM=grid.initial_utm,
+                                          cost=self.planner.cost_to_goal(), goal=waypoint))
+
+    async def _map(self) -> CostGrid:
+        p = self.parameters
+        if self.grid is None or not self.grid.initial_utm.any():  # no map merged yet
+            plan = await self.global_map.getPlanMap()
+            self.grid = CostGrid(plan, p.InflationRadius, p.MarginRadius, p.MarginCost)
+            self.planner = None
+            return self.grid
+        window = await self.global_map.getPlanMapChanges(self.grid.revision)
+        if window is None:
+            return self.grid
+        if window.fullRows == 0 and window.rows * window.cols != self.grid.raw.size:
+            self.grid = CostGrid(window, p.InflationRadius, p.MarginRadius, p.MarginCost)
+            self.planner = None  # another map: plan afresh
+            return self.grid
+        xs, ys, new = self.grid.apply(window)
+        if self.planner is not None and len(xs):
+            self.counters["cells_updated"] += self.planner.update_costs(xs, ys, new)
+        return self.grid
+
+    def _goal_cell(self, grid: CostGrid, waypoint: WaypointIDL) -> tuple[int, int] | None:
+        gx, gy = to_local(waypoint, grid.initial_utm)
+        cell = grid.cell_of(gx, gy)
+        if cell is None:
+            return None
+        return grid.free_near(cell, waypoint.tolerance / grid.gridsize)
+
+    def _plan(self, grid: CostGrid, start: tuple[int, int], goal: tuple[int, int]
+              ) -> PlanStatus:
+        tolerance = self.parameters.TrackingTolerance
+        if self.planner is None:
+            self.planner = DStarLite(grid.cost, start, goal)
+            self.goal = goal
+            self.counters["plans"] += 1
+            return self.planner.replan()
+        if goal != self.goal:
+            self.planner.move_start(start)
+            self.planner.set_goal(goal)
+            self.goal = goal
+            self.counters["plans"] += 1
+            return self.planner.replan()
+        self.planner.move_start(start)
+        if self.path and min(math.hypot(start[0] - c[0], start[1] - c[1])
+                             for c in self.path) > tolerance:
+            self.counters["tracking_replans"] += 1
+            return self.planner.rebuild()
+        self.counters["replans"] += 1
+        return self.planner.replan()
+
+    def _lookahead(self, grid: CostGrid, vehicle: tuple[float, float]) -> tuple[float, float]:
+        """The farthest path point between Min- and MaxLookahead cells along the path to
+        which the path runs within half a cell of the straight line."""
+        p = self.parameters
+        points = [grid.centre(c) for c in self.path]
+        if len(points) < 2:
+            return points[-1] if points else vehicle
+        g = grid.gridsize
+        travelled = 0.0
+        chosen = points[-1]
+        for k in range(1, len(points)):
+            travelled += math.dist(points[k - 1], points[k]) / g
+            if travelled < p.MinLookahead:
+                chosen = points[k]
+                continue
+            if travelled > p.MaxLookahead or not _straight(vehicle, points[:k + 1], 0.5 * g):
+                break
+            chosen = points[k]
+        return chosen
+
+    def _no_path(self) -> None:
+        self.counters["no_path"] += 1
+        self.path = []
+        self.votes.publish(ArcVotes.halt(len(self.arcs)).to_idl(
+            time=TimeIDL.from_seconds(self.clock.now()), behaviour=BEHAVIOUR, arcs=self.arcs))
+
+    def statistics(self) -> dict[str, Any]:
+        stats = super().statistics()
+        stats.update(self.counters)
+        if self.plan_times:
+            times = np.array(self.plan_times) * 1000.0
+            stats["plan_ms"] = {"mean": round(float(times.mean()), 3),
+                                "p95": round(float(np.percentile(times, 95)), 3),
+                                "max": round(float(times.max()), 3)}
+        if self.planner is not None:
+            stats["planner"] = dataclasses.asdict(self.planner.statistics())
+        return stats
+
+
+def _straight(origin: tuple[float, float], points: list[tuple[float, float]],
+              tolerance: float) -> bool:
+    """Whether every point lies within ``tolerance`` of the line from ``origin`` to the
+    last point."""
+    ex, ey = points[-1][0] - origin[0], points[-1][1] - origin[1]
+    length = math.hypot(ex, ey)
+    if length == 0.0:
+        return True
+    return all(abs((px - origin[0]) * ey - (py - origin[1]) * ex) / length <= tolerance
+               for px, py in points)

@@ -1,0 +1,270 @@
+"""The Global Map (seed §3.2.3, Table 18): the cumulative planning map of the mission area.
+
+- Subscribes to the global traversability map (``TraverseEventName``) and merges every
+  one into the planning grid (``Width`` × ``Depth`` at ``Gridsize``, centred on the pose
+  frame's origin, the start; :mod:`components.global_map.accumulate`: an a priori cost
+  layer and a sensed cost layer, cost ≥ 1 for traversable cells and inf for hazards, so
+  D* Lite's octile heuristic stays admissible).
+- Publishes ``PlanMapEventName`` (PlanMapEventIDL) after each merge that changed a cost:
+  only the changed window when it is smaller than the grid (the seed: to trigger the
+  redisplay of the developing map; afa: also a log of the planner's input).
+- Serves Table 18 under ``InterfaceName`` with the seed's semantics (planning node
+  (x, y) is cell [x, y]; see :mod:`idl.planning`), and the bulk access of decision 0009
+  (``getPlanMap``, ``getPlanMapChanges(revision)``) that FindPath plans from.
+- Keeps the waypoint list (set as Pure Pursuit's is) and the current waypoint: it
+  advances when the vehicle position of a traversability map comes within the
+  waypoint's tolerance, and wraps in patrol mode.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from afa import Event, SubscribePublishServer
+from afa.errors import EOutOfBounds
+from components.global_map.accumulate import CostMapping, PlanningGrid, Region
+from components.global_map.parameters import GlobalMapParameters
+from components.waypoints import to_local
+from idl import GlobalMap as GlobalMapInterface
+from idl import (
+    PlanMapEventIDL,
+    PlanningBoundaryIDL,
+    PlanPointIDL,
+    PoseTransformIDL,
+    Position3DIDL,
+    TimeIDL,
+    TravMapArrayEventIDL,
+    WaypointGroupIDL,
+    WaypointIDL,
+)
+
+__all__ = ["GlobalMap", "CHANGE_LOG"]
+
+#: How many merges' changed windows are remembered for getPlanMapChanges.
+CHANGE_LOG = 512
+
+
+class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
+    """The Global Map (module docstring)."""
+
+    def __init__(self, name: str, parameters: GlobalMapParameters | None = None) -> None:
+        super().__init__(name, parameters)
+        p = self.parameters
+        self.subscribes(p.TraverseEventName, TravMapArrayEventIDL, self._on_map, maxsize=4,
+                        required=True)
+        self.plan_maps = self.publishes(p.PlanMapEventName, PlanMapEventIDL)
+        self.serves(GlobalMapInterface, p.InterfaceName)
+        self.grid = self._new_grid()
+        self.revision = 0
+        self._log: deque[tuple[int, Region]] = deque(maxlen=CHANGE_LOG)
+        self.boundary = self._whole()
+        self.waypoints = WaypointGroupIDL()
+        self.current = 0
+        self.finished = False
+        self.initial_utm: np.ndarray | None = None
+        self.vehicle: Position3DIDL | None = None
+        self.heading = 0.0
+        self._whole_map: PlanMapEventIDL | None = None
+        self.counters = {"maps_merged": 0, "cells_changed": 0, "plan_maps_published": 0,
+                         "waypoints_reached": 0, "cells_outside": 0}
+
+    def _new_grid(self) -> PlanningGrid:
+        p = self.parameters
+        return PlanningGrid.centred(0.0, 0.0, p.Width / 1000.0, p.Depth / 1000.0,
+                                    p.Gridsize / 1000.0, CostMapping(unknown=p.UnknownCellCost))
+
+    def _whole(self) -> PlanningBoundaryIDL:
+        rows, cols = self.grid.geometry.shape
+        return PlanningBoundaryIDL(minX=0, minY=0, maxX=rows - 1, maxY=cols - 1)
+
+    # -- merging ---------------------------------------------------------------------------
+    def _on_map(self, event: Event) -> None:
+        body: TravMapArrayEventIDL = event.body  # type: ignore[assignment]
+        if self.initial_utm is None or not np.array_equal(body.initialUTM, self.initial_utm):
+            if self.initial_utm is not None:
+                self.log.warning("%s: the world frame's origin moved: the map starts again",
+                                 self.name)
+                self.grid = self._new_grid()
+                self._changed(Region(0, self.grid.geometry.rows, 0, self.grid.geometry.cols))
+            self.initial_utm = np.array(body.initialUTM)
+        self.vehicle = body.vehiclePosition
+        self.heading = body.vehicleHeading
+        change = self.grid.merge(body.hazard, body.goodness, body.mapPose, body.originX,
+                                 body.originY, body.gridsize, body.time.to_seconds())
+        self.counters["maps_merged"] += 1
+        self.counters["cells_outside"] += change.outside
+        self._track_waypoint()
+        if change.cost_region is not None:
+            self.counters["cells_changed"] += len(change)
+            self._changed(change.cost_region)
+
+    def _changed(self, region: Region) -> None:
+        self.revision += 1
+        self._log.append((self.revision, region))
+        self._whole_map = None
+        window = region if region.size * 2 < self.grid.geometry.size else None
+        self.plan_maps.publish(self._event(window))
+        self.counters["plan_maps_published"] += 1
+
+    def _event(self, region: Region | None) -> PlanMapEventIDL:
+        geometry = region.geometry(self.grid.geometry) if region is not None \
+            else self.grid.geometry
+        rows, cols = self.grid.geometry.shape
+        return PlanMapEventIDL(
+            time=TimeIDL.from_seconds(self.clock.now()), frame="World", mapPose=np.eye(4),
+            initialUTM=self.initial_utm if self.initial_utm is not None else np.zeros(3),
+            gridsize=geometry.gridsize, originX=geometry.origin_x, originY=geometry.origin_y,
+            rows=geometry.rows, cols=geometry.cols, **self.grid.layers(region),
+            vehiclePosition=self.vehicle or Position3DIDL(), vehicleHeading=self.heading,
+            planningBoundary=self.boundary, revision=self.revision,
+            fullRows=rows if region is not None else 0,
+            fullCols=cols if region is not None else 0)
+
+    # -- waypoints -------------------------------------------------------------------------
+    def _track_waypoint(self) -> None:
+        points = self.waypoints.waypoints
+        if not points or self.finished or self.vehicle is None or self.initial_utm is None:
+            return
+        target = points[self.current]
+        x, y = to_local(target, self.initial_utm)
+        if math.hypot(self.vehicle.x - x, self.vehicle.y - y) > target.tolerance:
+            return
+        self.counters["waypoints_reached"] += 1
+        if self.current + 1 < len(points):
+            self.current += 1
+        elif self.waypoints.patrolMode:
+            self.current = 0
+        else:
+            self.finished = True
+
+    # -- Table 18 ----------------------------------------------------------------------------
+    def _cell(self, p: PlanPointIDL) -> tuple[int, int]:
+        if not bool(self.grid.contains(p.x, p.y)):
+            rows, cols = self.grid.geometry.shape
+            raise EOutOfBounds(f"node ({p.x}, {p.y}) is outside the {rows}x{cols} planning "
+                               "grid")
+        return p.x, p.y
+
+    async def valid(self, p: PlanPointIDL) -> bool:
+        if not bool(self.grid.contains(p.x, p.y)) or not self.boundary.contains(p.x, p.y):
+            return False
+        return bool(np.isfinite(self.grid.cost_at(np.array([p.x]), np.array([p.y]))[0]))
+
+    async def getPlanningMap(self, p: PlanPointIDL) -> float:
+        i, j = self._cell(p)
+        return float(self.grid.a_priori[i, j])
+
+    async def getSensingMap(self, p: PlanPointIDL) -> float:
+        i, j = self._cell(p)
+        return float(self.grid.sensed_cost[i, j])
+
+    async def setPlanningMap(self, p: PlanPointIDL) -> bool:
+        if not bool(self.grid.contains(p.x, p.y)):
+            return False
+        change = self.grid.set_a_priori(p.x, p.y, p.aPrioriCost)
+        if change.cost_region is not None:
+            self._changed(change.cost_region)
+        return True
+
+    async def setSensingMap(self, p: PlanPointIDL) -> bool:
+        if not bool(self.grid.contains(p.x, p.y)):
+            return False
+        change = self.grid.set_sensed(p.x, p.y, p.sensedCost, self.clock.now())
+        if change.cost_region is not None:
+            self._changed(change.cost_region)
+        return True
+
+    async def getMap(self, p: PlanPointIDL) -> PlanPointIDL:
+        i, j = self._cell(p)
+        return PlanPointIDL(x=i, y=j, aPrioriCost=float(self.grid.a_priori[i, j]),
+                            sensedCost=float(self.grid.sensed_cost[i, j]),
+                            sensed=bool(self.grid.sensed[i, j]))
+
+    async def setMap(self, p: PlanPointIDL) -> bool:
+        if not bool(self.grid.contains(p.x, p.y)):
+            return False
+        changes = [self.grid.set_a_priori(p.x, p.y, p.aPrioriCost)]
+        if p.sensed:
+            changes.append(self.grid.set_sensed(p.x, p.y, p.sensedCost, self.clock.now()))
+        if any(c.cost_region is not None for c in changes):
+            self._changed(Region(p.x, p.x + 1, p.y, p.y + 1))
+        return True
+
+    async def getTransformToPlanningFromWorld(self) -> PoseTransformIDL:
+        return self._transform(self.grid.planning_from_world())
+
+    async def getTransformToWorldFromPlanning(self) -> PoseTransformIDL:
+        return self._transform(self.grid.world_from_planning())
+
+    def _transform(self, matrix: np.ndarray) -> PoseTransformIDL:
+        return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()), HTransform=matrix,
+                                initialUTM=self.initial_utm if self.initial_utm is not None
+                                else np.zeros(3))
+
+    async def getVehiclePosition(self) -> Position3DIDL | None:
+        return self.vehicle
+
+    async def getNextWaypoint(self, current: WaypointIDL) -> WaypointIDL | None:
+        points = self.waypoints.waypoints
+        for index, point in enumerate(points):
+            if (point.latitude, point.longitude) == (current.latitude, current.longitude):
+                if index + 1 < len(points):
+                    return points[index + 1]
+                return points[0] if self.waypoints.patrolMode else None
+        return None
+
+    async def setWaypointList(self, waypoints: WaypointGroupIDL) -> None:
+        self.waypoints = waypoints
+        self.current = 0
+        self.finished = False
+
+    async def getWaypointList(self) -> WaypointGroupIDL:
+        return self.waypoints
+
+    async def getCurrentWaypoint(self) -> WaypointIDL | None:
+        if self.finished or not self.waypoints.waypoints:
+            return None
+        return self.waypoints.waypoints[self.current]
+
+    async def setPlanningBoundary(self, boundary: PlanningBoundaryIDL) -> bool:
+        rows, cols = self.grid.geometry.shape
+        clipped = (max(0, boundary.minX), max(0, boundary.minY), min(rows - 1, boundary.maxX),
+                   min(cols - 1, boundary.maxY))
+        if clipped[2] < clipped[0] or clipped[3] < clipped[1]:
+            return False
+        self.boundary = PlanningBoundaryIDL(minX=clipped[0], minY=clipped[1], maxX=clipped[2],
+                                            maxY=clipped[3])
+        self._whole_map = None
+        return True
+
+    async def getPlanningBoundary(self) -> PlanningBoundaryIDL:
+        return self.boundary
+
+    async def getPlanMap(self) -> PlanMapEventIDL:
+        if self._whole_map is None:
+            self._whole_map = self._event(None)
+        return self._whole_map
+
+    async def getPlanMapChanges(self, revision: int) -> PlanMapEventIDL | None:
+        if revision == self.revision:
+            return None
+        oldest = self._log[0][0] if self._log else self.revision + 1
+        if revision > self.revision or revision < oldest - 1:
+            return await self.getPlanMap()
+        regions = [region for rev, region in self._log if rev > revision]
+        union = Region(min(r.i0 for r in regions), max(r.i1 for r in regions),
+                       min(r.j0 for r in regions), max(r.j1 for r in regions))
+        if union.size * 2 >= self.grid.geometry.size:
+            return await self.getPlanMap()
+        return self._event(union)
+
+    def statistics(self) -> dict[str, Any]:
+        stats = super().statistics()
+        stats.update(self.counters)
+        stats["revision"] = self.revision
+        stats["current_waypoint"] = None if self.finished else self.current
+        return stats

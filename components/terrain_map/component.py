@@ -1,0 +1,357 @@
+"""The Terrain Map (seed §3.2.1, Tables 11–14, A.6): laser and stereo returns fused into
+2.5-D grids.
+
+- At start it polls ModelServer (``PlatformEvent``) for ``getTransformation`` of the frames
+  its parameters name (``GroundFrame``, ``SickLaserFrame1/2``, ``DigiclopsFrame``), and
+  of any other frame a scan names, once each.
+- It subscribes to ``RangeEventName1..3`` (laser scan lines in either form, stereo frames
+  in either form) and to ``PoseEventName``. Each scan is placed with the pose at its own
+  time stamp (:class:`~components.terrain_map.grid.PoseBuffer`: interpolated between
+  poses; a scan newer than the newest pose waits for the next one, for at most
+  ``PENDING_LIMIT`` seconds; a scan older than the buffer is counted and dropped). The
+  pose audit of Table A.6 (``MaxVelocity``, ``PoseInterval``, ``OrientationDevError``)
+  refuses pose jumps the vehicle could not make: scans in such an interval are counted,
+  not fused. Invalid poses (``poseValidFlag`` false) are counted and not used. Stereo
+  frames are decimated so that they add no more points than the lasers gave in
+  ``StereoPeriod`` (:class:`~components.terrain_map.grid.StereoBalance`).
+- Vertical stabilisation: a 2.5-D map stitches scans taken seconds apart, so the
+  vehicle's height must be consistent over seconds, which a GPS elevation (0.3 m of
+  correlated noise for the Raptor's RT-20) is not: scans of flat ground would pile up
+  into half-metre "steps". The map therefore places scans with the vehicle's height
+  predicted from its own motion (the distance driven times the slope of its x axis,
+  from the IMU's attitude) and pulled towards the GPS height with a ``HEIGHT_TIME``
+  time constant: heights are locally consistent and follow the ground, their absolute
+  level drifts slowly (irrelevant to hazards, which are differences).
+- The *global* map (``Depth`` × ``Width`` at ``Gridsize``, frame ``World``: metres from
+  ``initialUTM``, north up) scrolls with the vehicle, centred on the ground frame (the
+  front bumper), so the ego view ahead stays inside it. The *ego* map
+  (``EgoDepth`` × ``EgoWidth`` ahead of the bumper, heading-aligned, ground
+  ``BumperHeight`` below the bumper) is a view of it at each publication.
+- Publication: every ``MapEventInterval`` seconds once ``MapUpdateTime`` has passed since
+  the map was (re)started empty, when ``notify`` is true: ``<EventName>``
+  (MapArrayEventIDL), ``<EventName>Ego`` (EgoMapArrayEventIDL), and the sequence forms
+  ``<EventName>Seq`` / ``<EventName>EgoSeq`` when someone subscribes to them (one event
+  name carries one type, so the forms get suffixes, as the lasers' ``Array`` form does).
+- Serves the Map interface (Table 12) under ``EventName``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any, cast
+
+import numpy as np
+
+from afa import EOutOfBounds, Event, SubscribePublishServer
+from afa.errors import AfaError, EDevIO
+from components.terrain_map.grid import (
+    EgoView,
+    PoseAudit,
+    PoseBuffer,
+    PoseStatus,
+    StereoBalance,
+    TerrainGrid,
+    TerrainLayers,
+    ego_map_pose,
+)
+from components.terrain_map.parameters import TerrainMapParameters
+from idl import (
+    EgoMapArrayEventIDL,
+    EgoMapSeqEventIDL,
+    Map,
+    MapArrayEventIDL,
+    MapSeqEventIDL,
+    Platform,
+    PoseTransformIDL,
+    Range3dArrayEventIDL,
+    Range3dLaserIDL,
+    Range3dSeqEventIDL,
+    Range3dStereoEventIDL,
+    TimeIDL,
+)
+
+__all__ = ["TerrainMap", "VEHICLE_FRAME", "PENDING_LIMIT", "POSE_BUFFER", "HEIGHT_TIME",
+           "HeightStabiliser"]
+
+VEHICLE_FRAME = "Raptor:RearAxleCenter"
+#: A scan newer than the newest pose waits this long (s) for the pose that follows it.
+PENDING_LIMIT = 0.5
+#: Poses kept for placing scans (ModelServer publishes ~14 a second: ~18 s).
+POSE_BUFFER = 256
+#: Time constant (s) with which the stabilised vehicle height follows the pose's.
+HEIGHT_TIME = 30.0
+_LASER = (Range3dSeqEventIDL, Range3dLaserIDL)
+_STEREO = (Range3dArrayEventIDL, Range3dStereoEventIDL)
+_RangeEvent = Range3dSeqEventIDL | Range3dLaserIDL | Range3dArrayEventIDL | Range3dStereoEventIDL
+
+
+class HeightStabiliser:
+    """The vehicle's height for stitching scans: predicted from its motion, pulled towards
+    the measured height with time constant ``tau`` (module docstring)."""
+
+    def __init__(self, tau: float = HEIGHT_TIME) -> None:
+        self.tau = tau
+        self._last: tuple[float, np.ndarray] | None = None
+        self.height = 0.0
+
+    def reset(self) -> None:
+        self._last = None
+
+    def __call__(self, time: float, world_from_vehicle: np.ndarray) -> np.ndarray:
+        """``world_from_vehicle`` with its height replaced by the stabilised one."""
+        pose = np.array(world_from_vehicle, dtype=np.float64)
+        measured = float(pose[2, 3])
+        if self._last is None or time <= self._last[0]:
+            self.height = measured
+        else:
+            t0, previous = self._last
+            dt = time - t0
+            axis = pose[:3, 0]  # the vehicle's x axis in the world
+            level = math.hypot(axis[0], axis[1])
+            moved = pose[:2, 3] - previous[:2, 3]
+            forward = float(moved @ axis[:2]) / level if level > 1e-9 else 0.0
+            predicted = self.height + forward * float(axis[2]) / max(level, 1e-9)
+            self.height = predicted + dt / (self.tau + dt) * (measured - predicted)
+        self._last = (time, pose.copy())
+        pose[2, 3] = self.height
+        return pose
+
+
+def frame_name(text: str) -> str:
+    """``Body:Frame`` without the spaces the seed prints around the colon."""
+    body, _, frame = text.partition(":")
+    return f"{body.strip()}:{frame.strip()}"
+
+
+class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
+    """The Terrain Map (module docstring)."""
+
+    def __init__(self, name: str, parameters: TerrainMapParameters | None = None) -> None:
+        super().__init__(name, parameters)
+        p = self.parameters
+        self.ground_frame = frame_name(p.GroundFrame)
+        self.maps = self.publishes(p.EventName, MapArrayEventIDL, enabled=p.notify)
+        self.ego_maps = self.publishes(p.EventName + "Ego", EgoMapArrayEventIDL,
+                                       enabled=p.notify)
+        self.map_seqs = self.publishes(p.EventName + "Seq", MapSeqEventIDL, enabled=p.notify)
+        self.ego_seqs = self.publishes(p.EventName + "EgoSeq", EgoMapSeqEventIDL,
+                                       enabled=p.notify)
+        for event_name, types in ((p.RangeEventName1, _LASER), (p.RangeEventName2, _LASER),
+                                  (p.RangeEventName3, _STEREO)):
+            if event_name:
+                self.subscribes(event_name, types, self._on_scan, maxsize=64)
+        self.subscribes(p.PoseEventName, PoseTransformIDL, self._on_pose, maxsize=64,
+                        required=True)
+        self.serves(Map, p.EventName)
+        self.platform = self.uses(Platform, p.PlatformEvent)
+        g = p.Gridsize / 1000.0
+        self.grid = TerrainGrid.centred(0.0, 0.0, p.Depth / 1000.0, p.Width / 1000.0, g)
+        self.ego = EgoView.ahead(p.EgoDepth / 1000.0, p.EgoWidth / 1000.0, g)
+        self.poses = PoseBuffer(POSE_BUFFER, PoseAudit.from_parameters(p))
+        self.heights = HeightStabiliser()
+        self.stable = np.eye(4)  # the latest pose with the stabilised height
+        self.stereo = StereoBalance(p.StereoPeriod)
+        self.frames: dict[str, np.ndarray | None] = {}
+        self.initial_utm: np.ndarray | None = None
+        self.pose: PoseTransformIDL | None = None
+        self._pending: deque[tuple[float, Event]] = deque()
+        self._filling_since = 0.0
+        self.counters = {"scans": 0, "points_fused": 0, "points_outside": 0,
+                         "points_nonfinite": 0, "invalid_poses": 0, "too_old": 0,
+                         "future_dropped": 0, "implausible": 0, "unknown_frames": 0,
+                         "maps_published": 0, "resets": 0}
+
+    async def setup(self) -> None:
+        self.latest_map = self.slot("terrain map")
+        self.latest_ego = self.slot("egocentric terrain map")
+        self.latest_seq = self.slot("terrain map (sequence)")
+        self.latest_ego_seq = self.slot("egocentric terrain map (sequence)")
+        self._reset()
+
+    async def run(self) -> None:
+        await self.bound(self.platform)
+        p = self.parameters
+        for text in (p.GroundFrame, p.SickLaserFrame1, p.SickLaserFrame2, p.DigiclopsFrame):
+            await self._transform(frame_name(text))
+        if self.frames.get(self.ground_frame) is None:
+            self.set_health(False, f"ModelServer does not know the ground frame "
+                                   f"{self.ground_frame}: no ego map")
+        async for _ in self.clock.periodic(p.MapEventInterval):
+            self._publish()
+
+    # -- inputs -----------------------------------------------------------------------------
+    def _on_pose(self, event: Event) -> None:
+        pose: PoseTransformIDL = event.body  # type: ignore[assignment]
+        if not pose.poseValidFlag:
+            self.counters["invalid_poses"] += 1
+            return
+        utm = pose.initialUTM
+        if self.initial_utm is None or not np.array_equal(utm, self.initial_utm):
+            if self.initial_utm is not None:
+                self.log.warning("%s: the pose frame's origin moved (initialUTM): the map "
+                                 "starts again", self.name)
+            self.initial_utm = np.array(utm)
+            self._reset()
+        stamp = pose.time.to_seconds()
+        self.stable = self.heights(stamp, pose.HTransform)
+        self.poses.add(stamp, self.stable)  # audited (and counted) there
+        self.pose = pose
+        ground = self.frames.get(self.ground_frame)
+        bumper = (pose.HTransform @ ground)[:3, 3] if ground is not None \
+            else pose.HTransform[:3, 3]
+        self.grid.recentre(float(bumper[0]), float(bumper[1]), slack=2)
+        self._retry_pending()
+
+    async def _on_scan(self, event: Event) -> None:
+        scan: _RangeEvent = event.body  # type: ignore[assignment]
+        transform = await self._transform(scan.frame)
+        if transform is None:
+            self.counters["unknown_frames"] += 1
+            return
+        self._place(event, transform)
+
+    def _place(self, event: Event, transform: np.ndarray) -> None:
+        scan: _RangeEvent = event.body  # type: ignore[assignment]
+        stamp = scan.time.to_seconds()
+        found = self.poses.lookup(stamp)
+        if found.status is PoseStatus.FUTURE or found.status is PoseStatus.EMPTY:
+            self._pending.append((self.clock.monotonic(), event))
+            return
+        if found.status is PoseStatus.TOO_OLD:
+            self.counters["too_old"] += 1
+            return
+        if found.status is PoseStatus.IMPLAUSIBLE:
+            self.counters["implausible"] += 1
+            return
+        assert found.transform is not None
+        points = scan.valid_points()
+        if isinstance(scan, _STEREO):
+            points = self.stereo.select(stamp, points)
+        else:
+            self.stereo.note_laser(stamp, len(points))
+        stats = self.grid.fuse_transformed(points, found.transform @ transform, stamp)
+        self.counters["scans"] += 1
+        self.counters["points_fused"] += stats.fused
+        self.counters["points_outside"] += stats.outside
+        self.counters["points_nonfinite"] += stats.nonfinite
+
+    def _retry_pending(self) -> None:
+        now = self.clock.monotonic()
+        pending, self._pending = self._pending, deque()
+        for queued, event in pending:
+            if now - queued > PENDING_LIMIT:
+                self.counters["future_dropped"] += 1
+                continue
+            transform = self.frames.get(event.body.frame)  # type: ignore[attr-defined]
+            if transform is not None:
+                self._place(event, transform)
+
+    async def _transform(self, frame: str) -> np.ndarray | None:
+        """^V T_frame from ModelServer, polled once per frame (None if unknown)."""
+        frame = frame_name(frame)
+        if frame in self.frames:
+            return self.frames[frame]
+        try:
+            pose = await self.platform.getTransformation(VEHICLE_FRAME, frame)
+        except EOutOfBounds as exc:
+            self.log.warning("%s: ModelServer does not know frame %r (%s): its scans are "
+                             "ignored", self.name, frame, exc)
+            self.frames[frame] = None
+            return None
+        except AfaError:
+            return None  # ModelServer not reachable yet: the next scan asks again
+        self.frames[frame] = np.asarray(pose.HTransform, dtype=np.float64)
+        return self.frames[frame]
+
+    def _reset(self) -> None:
+        self.grid.reset()
+        self.poses = PoseBuffer(POSE_BUFFER, self.poses.audit)
+        self.heights.reset()
+        self._pending.clear()
+        self._filling_since = self.clock.monotonic()
+        self.counters["resets"] += 1
+
+    # -- outputs -----------------------------------------------------------------------------
+    def _publish(self) -> None:
+        if self.pose is None or self.initial_utm is None:
+            return
+        if self.clock.monotonic() - self._filling_since < self.parameters.MapUpdateTime:
+            return  # a cleared map is still filling (Table A.6 MapUpdateTime)
+        stamp = TimeIDL.from_seconds(self.clock.now())
+        layers = self.grid.layers()
+        terrain = MapArrayEventIDL(**_header(layers, stamp, "World", np.eye(4),
+                                             self.initial_utm), **_layers(layers))
+        self.latest_map.set(terrain)
+        self.maps.publish(terrain)
+        if self.map_seqs.subscribed:
+            seq = cast(MapSeqEventIDL, terrain.to_seq())
+            self.latest_seq.set(seq)
+            self.map_seqs.publish(seq)
+        ground = self.frames.get(self.ground_frame)
+        if ground is not None:
+            pose = ego_map_pose(self.stable, ground,
+                                self.parameters.BumperHeight / 1000.0)
+            ego_layers = self.ego.sample(self.grid, pose)
+            ego = EgoMapArrayEventIDL(**_header(ego_layers, stamp, self.ground_frame, pose,
+                                                self.initial_utm), **_layers(ego_layers))
+            self.latest_ego.set(ego)
+            self.ego_maps.publish(ego)
+            if self.ego_seqs.subscribed:
+                ego_seq = cast(EgoMapSeqEventIDL, ego.to_seq())
+                self.latest_ego_seq.set(ego_seq)
+                self.ego_seqs.publish(ego_seq)
+        self.counters["maps_published"] += 1
+
+    def statistics(self) -> dict[str, Any]:
+        stats = super().statistics()
+        stats.update(self.counters)
+        stats["pending_scans"] = len(self._pending)
+        stats["poses"] = dict(self.poses.statistics)
+        return stats
+
+    # -- Map (Table 12) ----------------------------------------------------------------------
+    async def getMapArray(self) -> MapArrayEventIDL:
+        return self.latest_map.get()  # type: ignore[no-any-return]
+
+    async def getWaitMapArray(self) -> MapArrayEventIDL:
+        return await self.latest_map.wait_next(Map.wait_timeout)  # type: ignore[no-any-return]
+
+    async def getMapSeq(self) -> MapSeqEventIDL:
+        return self.latest_map.get().to_seq()  # type: ignore[no-any-return]
+
+    async def getWaitMapSeq(self) -> MapSeqEventIDL:
+        return (await self.latest_map.wait_next(Map.wait_timeout)).to_seq()  # type: ignore[no-any-return]
+
+    async def getEgoMapArray(self) -> EgoMapArrayEventIDL:
+        return self._ego_slot().get()  # type: ignore[no-any-return]
+
+    async def getWaitEgoMapArray(self) -> EgoMapArrayEventIDL:
+        return await self._ego_slot().wait_next(Map.wait_timeout)  # type: ignore[no-any-return]
+
+    async def getEgoMapSeq(self) -> EgoMapSeqEventIDL:
+        return self._ego_slot().get().to_seq()  # type: ignore[no-any-return]
+
+    async def getWaitEgoMapSeq(self) -> EgoMapSeqEventIDL:
+        return (await self._ego_slot().wait_next(Map.wait_timeout)).to_seq()  # type: ignore[no-any-return]
+
+    def _ego_slot(self) -> Any:
+        if self.frames.get(self.ground_frame) is None and self.latest_ego.version == 0:
+            raise EDevIO(f"{self.name} has no ego map: ModelServer does not know the ground "
+                         f"frame {self.ground_frame}")
+        return self.latest_ego
+
+
+def _header(layers: TerrainLayers, stamp: TimeIDL, frame: str, map_pose: np.ndarray,
+            initial_utm: np.ndarray) -> dict[str, Any]:
+    geo = layers.geometry
+    return {"time": stamp, "frame": frame, "mapPose": map_pose, "initialUTM": initial_utm,
+            "gridsize": geo.gridsize, "originX": geo.origin_x, "originY": geo.origin_y,
+            "rows": geo.rows, "cols": geo.cols}
+
+
+def _layers(layers: TerrainLayers) -> dict[str, Any]:
+    return {"elevation": layers.elevation, "minHeight": layers.min_height,
+            "maxHeight": layers.max_height, "pointCount": layers.count,
+            "variance": layers.variance}
+
