@@ -15,7 +15,12 @@ Needs the optional extra ``log`` (the ``mcap`` package): ``pip install 'afa[log]
 The file layout is in :mod:`afa.log.format` and ``docs/logs.md``.
 """
 
+from afa.log.check import CheckReport, Divergence, first_difference
 from afa.log.format import DroppedIDL, PollCallIDL
+from afa.log.player import Player, ReplayServant, check
+from afa.log.reader import LogChannel, LogError, LogMessage, LogReader, recover
 from afa.log.recorder import Recorder
 
-__all__ = ["Recorder", "PollCallIDL", "DroppedIDL"]
+__all__ = ["Recorder", "LogReader", "LogError", "LogChannel", "LogMessage", "recover",
+           "Player", "ReplayServant", "check", "CheckReport", "Divergence",
+           "first_difference", "PollCallIDL", "DroppedIDL"]
