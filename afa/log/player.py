@@ -41,7 +41,7 @@ from typing import Any, Union, get_args, get_origin
 from afa.clock import ScaledClock, VirtualClock
 from afa.component import Component, State
 from afa.errors import AfaError, ConfigError, EDevIO, InterfaceError
-from afa.events import Event, Overflow
+from afa.events import Overflow, peek_envelope
 from afa.log import format as fmt
 from afa.log.check import CheckReport, Divergence, first_difference
 from afa.log.reader import LogChannel, LogMessage, LogReader
@@ -94,9 +94,10 @@ class ReplayServant:
     Bound in the replay system's registry under the recorded name."""
 
     def __init__(self, interface: type[Interface], name: str, clock: Any,
-                 topics: dict[str, str]) -> None:
+                 topics: dict[str, str], decode: Any = None) -> None:
         self.interface = interface
         self.name = name
+        self._decode = decode or (lambda value: value)  # slots hold recorded messages
         self.calls: dict[str, _Call] = {}
         self._slots: dict[str, LatestSlot[Any]] = {}  # by topic
         self._by_type = topics  # qualified versioned type -> the topic carrying it
@@ -128,8 +129,8 @@ class ReplayServant:
         if topic is not None and not interface.methods[method].parameters:
             slot = self.slot(topic)
             if waits:
-                return await slot.wait_next(interface.wait_timeout)
-            return slot.get()
+                return self._decode(await slot.wait_next(interface.wait_timeout))
+            return self._decode(slot.get())
         if waits:
             plain = method.replace("Wait", "", 1)
             return await self._wait_call(method, plain)
@@ -288,7 +289,12 @@ class Player:
         self._next_stamp: float | None = None
         self._expected: dict[tuple[str, ...], deque[tuple[float, Any]]] = {}
         self._produced: dict[tuple[str, ...], deque[tuple[float, Any]]] = {}
-        self._watch: Any = None
+        self._watch: list[Any] = []
+        self._rerun_names = rerun_names
+        self._listeners: dict[str, list[ReplayServant]] = {}
+        for servant in self.servants.values():
+            for event_name in set(servant._by_type.values()):
+                self._listeners.setdefault(event_name, []).append(servant)
 
     # -- who runs, who is served ---------------------------------------------------------
     def _start_order(self, components: list[Component[Any]],
@@ -321,8 +327,14 @@ class Player:
                     for published in other.get("types") or []:
                         topics.setdefault(published, other.get("name", ""))
             name = join_name(self.robot, str(port.get("name")))
-            servants[name] = ReplayServant(interface, name, self.clock, topics)
+            servants[name] = ReplayServant(interface, name, self.clock, topics, self._body)
         return servants
+
+    def _body(self, message: LogMessage) -> Any:
+        event = self.reader.decode_event(message)
+        if event is None:
+            raise EDevIO(f"{message.channel.topic}: the recorded event cannot be decoded")
+        return event.body
 
     # -- running -------------------------------------------------------------------------
     async def __aenter__(self) -> Player:
@@ -336,8 +348,11 @@ class Player:
         """Start the replay system, bind the servants, and begin publishing."""
         system = self.system
         if self.check_mode:
-            self._watch = system.channel.subscribe("*", "*", maxsize=1 << 20,
-                                                   policy=Overflow.DROP_NEWEST)
+            names = sorted({p.name for c in self.rerun for p in c.ports()
+                            if p.direction.value == "publishes"})
+            self._watch = [system.channel.subscribe(self.robot, name, maxsize=1 << 20,
+                                                    policy=Overflow.DROP_NEWEST)
+                           for name in names]
             system.polls.add_hook(self._heard_poll)
         await system.start()
         for name, servant in self.servants.items():
@@ -401,9 +416,12 @@ class Player:
             current: float | None = None
             for message in reader.messages(start=first, end=self.last,
                                            channels=self._channels()):
-                event = reader.decode_event(message) if message.channel.kind == fmt.EVENT \
-                    else None
-                stamp = event.time if event is not None else message.time
+                header = None
+                if message.channel.kind == fmt.EVENT:
+                    header = self._header(message)
+                    if header is None:
+                        continue
+                stamp = header[2] if header is not None else message.time
                 if current is None or stamp > current:
                     self._next_stamp = stamp
                     await clock.sleep_until(stamp - self._base)
@@ -412,10 +430,11 @@ class Player:
                         self.finished.set()
                         return
                 self.position = stamp
-                self._deliver(message, event)
+                self._deliver(message, header)
             self._next_stamp = None
             if self.check_mode:
-                await clock.settle() if isinstance(clock, VirtualClock) else None
+                if isinstance(clock, VirtualClock):
+                    await clock.settle()
                 self._verify(before=None)
                 self.finished.set()
                 return
@@ -426,30 +445,37 @@ class Player:
             self._seek_state(first)
             self._republish(first)
 
-    def _deliver(self, message: LogMessage, event: Event | None) -> None:
+    def _header(self, message: LogMessage) -> tuple[str, str, float, int, str] | None:
+        if message.channel.id in self.reader._undecodable:
+            return None
+        try:
+            return peek_envelope(message.data)
+        except wire.WireError as exc:
+            self.reader._refuse(message.channel, str(exc))
+            return None
+
+    def _deliver(self, message: LogMessage, header: tuple[str, str, float, int, str] | None
+                 ) -> None:
         channel = message.channel
-        if channel.id in self.outputs:
-            if event is not None and event.origin in self._pending_or_rerun():
-                self._expected.setdefault(("event", event.domain, event.type, event.origin),
-                                          deque()).append((event.time, event.body))
-            if channel.id not in self.replayed:
-                return
-        if channel.id in self.replayed:
-            if event is not None:
-                self.system.channel.inject(event)
-                self.published += 1
-                self._tell_servants(channel, event)
+        if header is None:
+            if channel.id in self.polls:
+                self._replay_poll(message)
             return
-        if channel.id in self.polls:
-            self._replay_poll(message)
+        domain, event_type, stamp, _, origin = header
+        if channel.id in self.outputs and origin in self._rerun_names:
+            self._expected.setdefault(("event", domain, event_type, origin),
+                                      deque()).append((stamp, message))
+        if channel.id in self.replayed:
+            for servant in self._listeners.get(channel.event, ()):
+                servant.slot(channel.event).set(message)
+            if self.system.channel.subscribed(domain, event_type):
+                event = self.reader.decode_event(message)
+                if event is not None:
+                    self.system.channel.inject(event)
+                    self.published += 1
 
     def _pending_or_rerun(self) -> set[str]:
-        return {c.name for c in self.rerun}
-
-    def _tell_servants(self, channel: LogChannel, event: Event) -> None:
-        for servant in self.servants.values():
-            if channel.event in servant._by_type.values():
-                servant.slot(channel.event).set(event.body)
+        return self._rerun_names
 
     def _replay_poll(self, message: LogMessage) -> None:
         record = self.reader.decode_wire(message)
@@ -537,14 +563,9 @@ class Player:
     def _republish(self, target: int) -> None:
         latest = self.reader.latest_before(target, set(self.replayed) | set(self.polls))
         for message in sorted(latest.values(), key=lambda m: m.log_time):
-            if message.channel.id in self.replayed:
-                event = self.reader.decode_event(message)
-                if event is not None:
-                    self.system.channel.inject(event)
-                    self.published += 1
-                    self._tell_servants(message.channel, event)
-            else:
-                self._replay_poll(message)
+            header = self._header(message) if message.channel.kind == fmt.EVENT else None
+            if message.channel.kind != fmt.EVENT or header is not None:
+                self._deliver(message, header)
 
     # -- the check ------------------------------------------------------------------------
     def _heard_poll(self, record: PollRecord) -> None:
@@ -553,14 +574,16 @@ class Player:
                                       deque()).append((record.time, record))
 
     def _collect(self) -> None:
-        watch = self._watch
-        names = self._pending_or_rerun()
-        while (event := watch.get_nowait()) is not None:
-            if event.origin in names:
-                self._produced.setdefault(("event", event.domain, event.type, event.origin),
-                                          deque()).append((event.time, event.body))
-        if watch.statistics().dropped:
-            self.report.problems.append("the check's buffer overflowed; outputs were lost")
+        names = self._rerun_names
+        for watch in self._watch:
+            while (event := watch.get_nowait()) is not None:
+                if event.origin in names:
+                    self._produced.setdefault(("event", event.domain, event.type,
+                                               event.origin), deque()).append(
+                        (event.time, event.body))
+            if watch.statistics().dropped:
+                self.report.problems.append(
+                    f"the check's buffer of {watch.type} overflowed; outputs were lost")
 
     def _verify(self, before: float | None) -> bool:
         """Compare what both sides have; True (and the report set) at a divergence."""
@@ -600,7 +623,10 @@ class Player:
         if kind == "event":
             if abs(t_rec - t_rep) > self.atol:
                 return ("(time)", t_rec, t_rep)
-            return first_difference(rec, rep, atol=self.atol)
+            event = self.reader.decode_event(rec)
+            if event is None:
+                return ("(undecodable)", rec.channel.topic, rep)
+            return first_difference(event.body, rep, atol=self.atol)
         if abs(t_rec - t_rep) > self.atol:
             return ("(time)", t_rec, t_rep)
         try:
@@ -625,6 +651,8 @@ async def check(path: str | Path, config: str | Path | None = None, *,
 
 
 def _summary(value: Any) -> str:
+    if isinstance(value, LogMessage):
+        return f"a recorded {value.channel.schema} event"
     if isinstance(value, IDLModel):
         return f"{type(value).__name__} at {getattr(value, 'time', '')}"
     return repr(value)
