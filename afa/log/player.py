@@ -281,7 +281,8 @@ class Player:
         self.first = reader.start + (0 if start is None else round(start * 1e9))
         self.last = None if end is None else reader.start + round(end * 1e9)
         self.position = fmt.from_ns(self.first)  #: replay time: the stamp reached
-        self.published = 0
+        self.published = 0  #: recorded events published (to subscribers)
+        self.delivered = 0  #: recorded messages handled (events, polls, expected outputs)
         self.finished = asyncio.Event()
         self.report = CheckReport(str(reader.path), [c.name for c in self.rerun],
                                   sorted({c.event for c in self.replayed.values()}))
@@ -430,6 +431,7 @@ class Player:
                         self.finished.set()
                         return
                 self.position = stamp
+                self.delivered += 1
                 self._deliver(message, header)
             self._next_stamp = None
             if self.check_mode:
@@ -524,9 +526,10 @@ class Player:
 
     async def step(self) -> None:
         """Publish the next message (works paused: the clock moves just to its time)."""
+        if self._next_stamp is None:  # the feeder has not reached its first wait yet
+            await self.clock.settle()
         target = self._next_stamp
         if target is None:
-            await self.clock.advance(0.0)
             return
         await self.clock.advance(max(0.0, target - (self._base + self.clock.monotonic())))
 
