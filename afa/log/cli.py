@@ -19,7 +19,8 @@ import numpy as np
 
 from afa.errors import AfaError
 from afa.log import format as fmt
-from afa.log.reader import LogChannel, LogError, LogReader, recover as recover_file
+from afa.log.reader import LogChannel, LogError, LogReader
+from afa.log.reader import recover as recover_file
 from afa.log.recorder import Recorder
 
 __all__ = ["start_recording", "replay", "info", "echo", "recover"]

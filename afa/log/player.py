@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import asyncio
 import json
-import types
 import logging
+import types
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -378,8 +378,8 @@ class Player:
         from afa.tasks import Scope
 
         async with Scope() as scope:
-            runner = scope.spawn(self.system.run(), "player-system")
-            waiter = scope.spawn(self.finished.wait(), "player-finished")
+            runner: asyncio.Task[Any] = scope.spawn(self.system.run(), "player-system")
+            waiter: asyncio.Task[Any] = scope.spawn(self.finished.wait(), "player-finished")
             done, _ = await asyncio.wait([runner, waiter], return_when=asyncio.FIRST_COMPLETED)
             for task in (runner, waiter):
                 task.cancel()

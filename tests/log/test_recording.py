@@ -10,7 +10,6 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from afa import EOutOfBounds, SubscribePublishServer, System, VirtualClock
 from afa.log import LogReader, PollCallIDL, Recorder, recover
