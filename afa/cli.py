@@ -68,7 +68,19 @@ def _parser() -> argparse.ArgumentParser:
                           "lasers on loopback TCP (real transports; not with --fast)")
     run.add_argument("--strict", action="store_true",
                      help="fail if a configured component is not implemented yet")
+    run.add_argument("--record", type=Path, metavar="FILE.mcap",
+                     help="record every event, poll and viewer channel to an MCAP file "
+                          "(docs/logs.md)")
+    run.add_argument("--record-events", metavar="PATTERNS",
+                     help="with --record: only these event names (comma-separated, "
+                          "wildcards allowed: 'Pose,Gps,Laser*')")
+    run.add_argument("--record-compression", choices=["zstd", "lz4", "none"], default="zstd",
+                     help="with --record: chunk compression (default zstd)")
+    run.add_argument("--record-no-viewer", action="store_true",
+                     help="with --record: leave out the Foxglove viewer channels")
     run.set_defaults(handler=_run)
+
+    _log_parsers(commands)
 
     config = commands.add_parser("config", help="check, show or generate configuration")
     config_commands = config.add_subparsers(required=True, metavar="ACTION")
@@ -100,6 +112,58 @@ def _parser() -> argparse.ArgumentParser:
     decode.add_argument("file", type=Path, help="raw capture ('-' for stdin)")
     decode.set_defaults(handler=_decode)
     return parser
+
+
+def _log_parsers(commands: Any) -> None:
+    """``afa replay`` and ``afa log info|echo|recover`` (their code: afa.log.cli)."""
+    replay = commands.add_parser(
+        "replay", help="replay a recording into the components of a configuration")
+    replay.add_argument("file", type=Path, help="the recording (FILE.mcap)")
+    replay.add_argument("config", type=Path, nargs="?",
+                        help="configuration to replay into (default: the recorded one)")
+    replay.add_argument("--speed", default="1", metavar="X|max",
+                        help="multiple of real time, or max (virtual time; default 1)")
+    replay.add_argument("--start", type=float, metavar="T", help="start T s into the recording")
+    replay.add_argument("--end", type=float, metavar="T", help="stop T s into the recording")
+    replay.add_argument("--loop", action="store_true", help="start again at the end")
+    replay.add_argument("--paused", action="store_true",
+                        help="start paused (space resumes; see the keys in docs/logs.md)")
+    replay.add_argument("--only", metavar="NAMES",
+                        help="comma-separated components to re-run and/or topics to replay")
+    replay.add_argument("--skip", metavar="NAMES",
+                        help="comma-separated components not to re-run and/or topics not "
+                             "to replay")
+    replay.add_argument("--check", action="store_true",
+                        help="re-run in virtual time and compare every output with the "
+                             "recorded one; stop at the first divergence (exit 3)")
+    replay.add_argument("--atol", type=float, default=0.0,
+                        help="with --check: absolute tolerance for numbers (default 0: exact)")
+    replay.set_defaults(handler=_log_handler("replay"))
+
+    log_parser = commands.add_parser("log", help="inspect and repair recordings")
+    actions = log_parser.add_subparsers(required=True, metavar="ACTION")
+    info = actions.add_parser("info", help="duration, topics, counts, rates, polls, drops")
+    info.add_argument("file", type=Path)
+    info.add_argument("--json", action="store_true", help="as one JSON document")
+    info.set_defaults(handler=_log_handler("info"))
+    echo = actions.add_parser("echo", help="print one topic's messages")
+    echo.add_argument("file", type=Path)
+    echo.add_argument("topic", help="event name (Pose), topic (/Raptor/Pose) or poll topic")
+    echo.add_argument("--json", action="store_true", help="one JSON document per line")
+    echo.set_defaults(handler=_log_handler("echo"))
+    recover = actions.add_parser("recover", help="rewrite a cut-off or damaged recording whole")
+    recover.add_argument("file", type=Path, help="the damaged recording")
+    recover.add_argument("output", type=Path, help="the file to write")
+    recover.set_defaults(handler=_log_handler("recover"))
+
+
+def _log_handler(name: str) -> Callable[[argparse.Namespace], int]:
+    def handler(args: argparse.Namespace) -> int:
+        from afa.log import cli
+
+        return int(getattr(cli, name)(args))
+
+    return handler
 
 
 # -- config -----------------------------------------------------------------------------
@@ -303,6 +367,11 @@ async def _run_system(args: argparse.Namespace) -> int:
     system = System.from_xml(args.config, **options)
     if simulation is not None:
         simulation.attach(system)
+    recorder = None
+    if args.record is not None:
+        from afa.log.cli import start_recording
+
+        recorder = start_recording(args, system, simulation)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -320,7 +389,11 @@ async def _run_system(args: argparse.Namespace) -> int:
                 await _until_stopped(system, stop, args.duration,
                                      _progress(system, simulation, clock, clock_start,
                                                wall_start))
+            if recorder is not None:
+                await recorder.drain()
             summary = _summary(system, clock_start, wall_start)
+            if recorder is not None:
+                summary["recording"] = {"file": str(args.record), **recorder.statistics()}
             if simulation is not None:
                 summary.update(simulation.summary())
                 if not simulation.teleop:
@@ -333,13 +406,17 @@ async def _run_system(args: argparse.Namespace) -> int:
         await _close(simulation)
         print(f"afa run: stopped: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    finally:
+        if recorder is not None:
+            recorder.finish()  # the index and summary; what was flushed is safe anyway
     await _close(simulation)
     _print_summary(summary)
     if args.summary is not None:
         args.summary.write_text(json.dumps(summary, indent=2))
     if not summary["stack_up"]:
         down = [f"{name} ({info['detail'] or info['state']})"
-                for name, info in summary["components"].items() if not info["ever_healthy"]]
+                for name, info in summary["components"].items()
+                if not info["ever_healthy"] and not info["waiting"]]
         hint = ""
         if not args.sim and any("cannot open device" in info["detail"]
                                 for info in summary["components"].values()):
@@ -400,10 +477,12 @@ def _summary(system: Any, clock_start: float, wall_start: float) -> dict[str, An
         "events_dropped": statistics["events_dropped"],
         "component_errors": {name: h.failures for name, h in health.items() if h.failures},
         "components": {name: {"state": h.state.value, "healthy": h.healthy, "detail": h.detail,
-                              "ever_healthy": h.ever_healthy, "restarts": h.restarts,
-                              "last_error": h.last_error}
+                              "ever_healthy": h.ever_healthy, "waiting": list(h.waiting),
+                              "restarts": h.restarts, "last_error": h.last_error}
                        for name, h in health.items()},
-        "stack_up": all(h.ever_healthy for h in health.values()),
+        # up: every component was healthy at some moment, or is itself fine and only
+        # waiting for an input that has not come yet (a map filling for MapUpdateTime)
+        "stack_up": all(h.ever_healthy or h.waiting for h in health.values()),
         "not_started": list(system.notes),
     }
 
@@ -422,5 +501,5 @@ def _print_summary(summary: dict[str, Any]) -> None:
     for name, info in summary["components"].items():
         flag = "ok" if info["healthy"] else f"UNHEALTHY {info['detail']}".strip()
         if not info["ever_healthy"]:
-            flag += " (never came up)"
+            flag += " (no input yet)" if info["waiting"] else " (never came up)"
         print(f"  {name:24s} {info['state']:9s} restarts={info['restarts']:<3d} {flag}")

@@ -40,7 +40,14 @@ from afa.errors import ETimeOut
 from afa.tasks import loop_service
 
 __all__ = ["Clock", "WallClock", "VirtualClock", "ScaledClock", "TimerHandle", "Watchdog",
-           "Deadline", "DEFAULT_EPOCH"]
+           "Deadline", "DEFAULT_EPOCH", "TIME_TOLERANCE"]
+
+#: The slack a component allows when it compares a duration with a threshold ("at
+#: least every 0.2 s", "older than 1 s"). Event times are stamps (epoch seconds as
+#: float64, exact to ~0.25 µs), so a replay rebuilds monotonic times that differ from
+#: the recorded run's by that much; a comparison on the knife edge (a timer at 4.8 s
+#: against an event at 4.6 s) must not flip with it.
+TIME_TOLERANCE = 1e-6
 
 #: 2005-09-17 12:00:00 UTC, the date in the Raptor's geometry file name (050917...).
 DEFAULT_EPOCH = 1126958400.0

@@ -142,6 +142,9 @@ class Health:
     failures: int
     last_error: str | None
     ever_healthy: bool = False  #: healthy at some moment of this run
+    #: required inputs not received yet, while the component itself is fine (a map
+    #: still filling upstream is not a fault of the component waiting for it)
+    waiting: tuple[str, ...] = ()
 
 
 class _Forever:
@@ -315,7 +318,7 @@ class Component(Generic[P]):
             detail = f"waiting for {', '.join(waiting)}"
         return Health(self.name, self.state, healthy, detail, self.restarts, self.failures,
                       None if self.last_error is None else repr(self.last_error),
-                      self._ever_healthy)
+                      self._ever_healthy, tuple(waiting) if self._healthy else ())
 
     # -- lifecycle (driven by the supervisor) ------------------------------------------
     def _attach(self, context: Context) -> None:

@@ -41,7 +41,7 @@ from idl import wire
 from idl._base import IDLModel
 
 __all__ = ["Event", "EventChannel", "Subscription", "Publisher", "Overflow",
-           "SubscriptionStatistics"]
+           "SubscriptionStatistics", "peek_envelope"]
 
 
 _ENVELOPE = struct.Struct("<4sdQHHH")
@@ -88,6 +88,24 @@ class Event(NamedTuple):
             raise wire.WireError(f"event names are not UTF-8: {exc}") from None
         body: IDLModel = wire.decode(view[offset:])  # arrays: views of ``data`` (bytes)
         return cls(names[0], names[1], time, seq, body, names[2])
+
+
+def peek_envelope(data: bytes | bytearray | memoryview) -> tuple[str, str, float, int, str]:
+    """``(domain, type, time, seq, origin)`` of an :meth:`Event.encode` frame, without
+    decoding the body (a log player schedules and filters by these). Raises
+    :class:`idl.wire.WireError` for a frame that is not an event."""
+    try:
+        magic, time, seq, n_domain, n_type, n_origin = _ENVELOPE.unpack_from(data)
+        if magic != _EVENT_MAGIC:
+            raise wire.WireError(f"not an afa event (magic {magic!r})")
+        offset = _ENVELOPE.size
+        domain = bytes(data[offset:offset + n_domain]).decode()
+        event_type = bytes(data[offset + n_domain:offset + n_domain + n_type]).decode()
+        start = offset + n_domain + n_type
+        origin = bytes(data[start:start + n_origin]).decode()
+    except (struct.error, UnicodeDecodeError) as exc:
+        raise wire.WireError(f"bad event envelope: {exc}") from None
+    return domain, event_type, time, seq, origin
 
 
 class Overflow(StrEnum):
@@ -270,13 +288,14 @@ class EventChannel:
         self._changed()
         return subscription
 
-    def observe(self, *, maxsize: int = 4096,
+    def observe(self, domain: str = "*", type: str = "*", *, maxsize: int = 4096,
                 policy: Overflow = Overflow.DROP_OLDEST) -> Subscription:
-        """A subscription to every event of every domain, for observers (digests,
-        recorders, the console, bridges): its own bounded buffer, statistics and
+        """A subscription for observers (digests, recorders, the console, bridges), by
+        default to every event of every domain: its own bounded buffer, statistics and
         isolation. The observer reads it in its own task; a full buffer drops and
-        counts, it never slows the publisher."""
-        subscription = self.subscribe("*", "*", maxsize=maxsize, policy=policy)
+        counts, it never slows the publisher, and it does not make an event
+        :meth:`subscribed` (watching must not change what suppliers build)."""
+        subscription = self.subscribe(domain, type, maxsize=maxsize, policy=policy)
         subscription.observer = True
         return subscription
 

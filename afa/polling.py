@@ -25,6 +25,7 @@ classes.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import inspect
 import logging
 from collections.abc import Awaitable, Callable, Sequence
@@ -45,12 +46,16 @@ __all__ = [
     "LatestSlot", "Servant", "Proxy", "Invoker", "LocalInvoker", "Call", "Middleware",
     "PollLayer", "MethodStatistics", "PollRecord", "proxy_for", "check_servant",
     "encode_arguments", "decode_arguments", "encode_result", "decode_result",
-    "encode_error", "decode_error", "PollError", "proxy_name",
+    "encode_error", "decode_error", "PollError", "proxy_name", "current_caller",
 ]
 
 T = TypeVar("T")
 InterfaceT = TypeVar("InterfaceT", bound=Interface)
 log = logging.getLogger("afa.polling")
+
+#: The component whose task is running (set for every task of a component's life), so a
+#: recording hook can say who made a call; "" outside components (tools, notebooks).
+current_caller: contextvars.ContextVar[str] = contextvars.ContextVar("afa_caller", default="")
 
 
 class LatestSlot(Generic[T]):
@@ -238,6 +243,7 @@ class PollRecord:
     result: Any = None
     error: BaseException | None = None
     duration: float = 0.0
+    caller: str = ""  #: the calling component ("" outside components)
 
 
 class PollLayer:
@@ -287,7 +293,8 @@ class PollLayer:
                 stats.maximum = duration
             if self._hooks:
                 record = PollRecord(stamp, call.name, call.interface, call.method,
-                                    call.arguments, result, error, duration)
+                                    call.arguments, result, error, duration,
+                                    current_caller.get())
                 for hook in list(self._hooks):
                     try:
                         hook(record)

@@ -36,7 +36,7 @@ from afa.component import Component, Context, Health, PublishServerReactor, Rest
 from afa.errors import ComponentError, StartupError, TaskFailed
 from afa.events import Event, EventChannel, Overflow, Subscription
 from afa.naming import NameRegistry, join_name
-from afa.polling import LocalInvoker, PollLayer, proxy_for
+from afa.polling import LocalInvoker, PollLayer, current_caller, proxy_for
 from afa.ports import Catalog
 from afa.tasks import Scope, TaskGroup
 from afa.transport import DeviceFactory, DeviceOpener
@@ -359,9 +359,11 @@ class System:
 
     def _launch(self, component: Component[Any]) -> None:
         component._set_state(State.CREATED)
+        context = self.tasks.context()  # the component's own: its polls name their caller
+        context.run(current_caller.set, component.name)
         self._supervisors[component.name] = self.tasks.spawn(
             self._supervise(component), owner=component.name,
-            name=f"afa-supervisor:{component.name}")
+            name=f"afa-supervisor:{component.name}", context=context)
 
     async def _supervise(self, component: Component[Any]) -> None:
         policy = component.restart_policy or self.restart_policy

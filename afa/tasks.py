@@ -73,17 +73,23 @@ class TaskGroup:
         self._token: contextvars.Token[TaskGroup | None] | None = None
 
     def spawn(self, coroutine: Coroutine[Any, Any, T], *, owner: str,
-              name: str | None = None) -> asyncio.Task[T]:
-        """Run ``coroutine`` as a task owned by ``owner``. Raises RuntimeError if the
-        group is closed (the coroutine is closed, never left unawaited)."""
+              name: str | None = None,
+              context: contextvars.Context | None = None) -> asyncio.Task[T]:
+        """Run ``coroutine`` as a task owned by ``owner`` (in ``context``, a copy of
+        :meth:`context`, to give it context variables of its own). Raises RuntimeError
+        if the group is closed (the coroutine is closed, never left unawaited)."""
         if self._closed:
             coroutine.close()
             raise RuntimeError(f"task group {self.name} is closed; cannot start {owner}'s task")
-        task = asyncio.get_running_loop().create_task(coroutine, name=name or owner,
-                                                      context=self._context)
+        task = asyncio.get_running_loop().create_task(
+            coroutine, name=name or owner, context=self._context if context is None else context)
         self._tasks.add(task)
         task.add_done_callback(lambda done: self._done(done, owner))
         return task
+
+    def context(self) -> contextvars.Context:
+        """A copy of the group's context (its tasks find the group through it)."""
+        return self._context.copy()
 
     def _done(self, task: asyncio.Task[Any], owner: str) -> None:
         self._tasks.discard(task)

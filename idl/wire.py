@@ -62,7 +62,8 @@ def encode_parts(model: IDLModel) -> list[bytes | memoryview]:
     if not buffers:
         parts.append(b"\x00\x00")
         return parts
-    views = [memoryview(array).cast("B") for array in buffers]
+    views = [memoryview(array).cast("B") if array.size else memoryview(b"")
+             for array in buffers]  # an empty array (a scan with no return) has no bytes
     table = _U16.pack(len(views)) + b"".join(_U64.pack(v.nbytes) for v in views)
     parts.append(table)
     offset = sum(len(p) for p in parts)

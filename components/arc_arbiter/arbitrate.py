@@ -68,6 +68,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from afa.clock import TIME_TOLERANCE
 from components.arc_arbiter.parameters import ArcArbiterParameters
 from components.arcs import ArcSet
 from idl.planning import ArcVoteIDL
@@ -211,7 +212,7 @@ class VoteArbiter:
         """
         if not math.isfinite(now):
             raise ValueError(f"time must be finite, got {now!r}")
-        limit = self.stale_after
+        limit = self.stale_after + TIME_TOLERANCE
         stale_names = [b for b, e in self._book.items() if now - e.received > limit]
         for name in stale_names:
             del self._book[name]

@@ -26,6 +26,7 @@ import asyncio
 from typing import Any
 
 from afa import Event, SubscribePublishServer
+from afa.clock import TIME_TOLERANCE
 from afa.errors import AfaError
 from components.arc_arbiter.arbitrate import ArbiterDecision, VoteArbiter
 from components.arc_arbiter.parameters import ArcArbiterParameters
@@ -88,13 +89,13 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self.decision = decision
         self.counters["decisions"] += 1
         key = (decision.index, decision.speed, decision.steering)
-        if key != self._sent or now - self._sent_at >= COMMAND_REFRESH:
+        if key != self._sent or now - self._sent_at >= COMMAND_REFRESH - TIME_TOLERANCE:
             if decision.failsafe is not None and (self._sent is None or self._sent[1] > 0):
                 self.counters["failsafe_stops"] += 1
             self._sent, self._sent_at = key, now
             await self._command(decision)
         shown = (decision.index, decision.speed, decision.failsafe or "")
-        if shown != self._published or now - self._published_at >= COMMAND_REFRESH:
+        if shown != self._published or now - self._published_at >= COMMAND_REFRESH - TIME_TOLERANCE:
             self._published, self._published_at = shown, now
             self._publish(decision)
 

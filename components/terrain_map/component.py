@@ -44,6 +44,7 @@ from typing import Any, cast
 import numpy as np
 
 from afa import EOutOfBounds, Event, SubscribePublishServer
+from afa.clock import TIME_TOLERANCE
 from afa.errors import AfaError, EDevIO
 from components.terrain_map.grid import (
     EgoView,
@@ -276,7 +277,8 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
     def _publish(self) -> None:
         if self.pose is None or self.initial_utm is None:
             return
-        if self.clock.monotonic() - self._filling_since < self.parameters.MapUpdateTime:
+        if (self.clock.monotonic() - self._filling_since
+                < self.parameters.MapUpdateTime - TIME_TOLERANCE):
             return  # a cleared map is still filling (Table A.6 MapUpdateTime)
         stamp = TimeIDL.from_seconds(self.clock.now())
         layers = self.grid.layers()

@@ -21,6 +21,7 @@ from __future__ import annotations
 from typing import Any
 
 from afa import Event, SubscribePublishServer
+from afa.clock import TIME_TOLERANCE
 from afa.errors import EDevIO
 from components.terrain_map.grid import GridGeometry, TerrainLayers, yaw_of
 from components.traversability_map.hazards import (
@@ -81,7 +82,8 @@ class TraversabilityMap(SubscribePublishServer[TraversabilityMapParameters]):
 
     async def run(self) -> None:
         async for _ in self.clock.periodic(self.parameters.MapEventInterval):
-            if self.clock.monotonic() - self._filling_since >= self.parameters.MapUpdateTime:
+            if (self.clock.monotonic() - self._filling_since
+                    >= self.parameters.MapUpdateTime - TIME_TOLERANCE):
                 self._publish()
 
     def _fresh(self, stamp: TimeIDL) -> bool:

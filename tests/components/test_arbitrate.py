@@ -133,7 +133,8 @@ def test_votes_go_stale_after_stale_vote_time():
     a = arbiter(StaleVoteTimeSec=1, StaleVoteTimeUSec=500000)
     a.receive(vote("PurePursuit", peak=3), 10.0)
     assert a.decide(11.5).index == 3  # exactly 1.5 s old: still fresh
-    d = a.decide(11.500001)
+    assert a.decide(11.5000005).index == 3  # within afa.clock.TIME_TOLERANCE (1 µs)
+    d = a.decide(11.50001)
     assert d.failsafe == "no-fresh-vote" and d.stale == ("PurePursuit",) and d.fresh == ()
     assert a.behaviours == ()
     a.receive(vote("PurePursuit", peak=4), 12.0)

@@ -31,7 +31,9 @@ def test_run_reports_what_is_not_implemented_and_stops_cleanly(tmp_path):
     assert result.returncode == 0, result.stderr
     data = json.loads(summary.read_text())
     assert data["sim_time_s"] >= 10.0  # the maps publish after MapUpdateTime (7 s)
-    assert data["stack_up"] is True  # every started component was healthy at some point
+    assert data["stack_up"] is True
+    # after MapUpdateTime every started component, maps included, was healthy at some point
+    assert all(info["ever_healthy"] for info in data["components"].values()), data["components"]
     for key in ("wall_time_s", "realtime_factor", "events", "events_dropped",
                 "component_errors", "components", "not_started"):
         assert key in data

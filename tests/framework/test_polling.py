@@ -333,3 +333,30 @@ async def test_middleware_counts_calls_errors_and_latency_and_hooks_record_calls
     assert [(r.method, r.arguments, r.result) for r in records[:2]] == [
         ("getWaitReading", {}, Reading(value=1.0)), ("setGain", {"gain": 2.0}, True)]
     assert isinstance(records[2].error, EOutOfBounds)
+
+
+async def test_a_recording_hook_hears_which_component_made_the_call():
+    class Poller(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.sensor = self.uses(Sensor, "Sensor")
+
+        async def run(self):
+            await self.bound(self.sensor)
+            await self.sensor.setGain(2.0)
+
+    clock = VirtualClock(start=0.0)
+    server = SensorServer(clock)
+
+    class Host(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.serves(Sensor, "Sensor", impl=server)
+
+    system = System([Host("Host"), Poller("A"), Poller("B")], clock=clock)
+    records = []
+    system.polls.add_hook(records.append)
+    async with system:
+        await clock.advance(0.1)
+        await system.proxy(Sensor, "Sensor").setGain(3.0)  # outside any component
+    assert sorted(r.caller for r in records) == ["", "A", "B"]

@@ -160,3 +160,13 @@ def test_damaged_frames_raise_wire_error_and_nothing_else(data):
 def test_random_bytes_raise_wire_error(data):
     with pytest.raises(wire.WireError):
         wire.decode(b"AFW1" + data if data[:1] == b"\x00" else data)
+
+
+def test_empty_arrays_travel_too():
+    """A laser scan line with no return has a (0, 3) point array."""
+    from idl import Range3dSeqEventIDL
+
+    empty = Range3dSeqEventIDL(time=TimeIDL(sec=1), sensorId=11, frame="L:F",
+                               points=np.zeros((0, 3), np.float32))
+    again = wire.decode(wire.encode(empty))
+    assert again == empty and again.points.shape == (0, 3)

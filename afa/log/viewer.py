@@ -1,0 +1,328 @@
+"""Viewer channels: afa events as Foxglove schemas, so a recording opens usefully in
+Foxglove or Lichtblick (their 3-D panel draws a topic only if its schema name is exactly
+one of Foxglove's). JSON messages (schema encoding ``jsonschema``, message encoding
+``json``, bytes in base64), and only long-standing schemas Lichtblick also reads:
+
+================================  ======================  ==================================
+afa body                          topic                   Foxglove schema
+================================  ======================  ==================================
+PoseTransformIDL (``Pose``)       ``/viz/<event>``        ``foxglove.PoseInFrame`` (world)
+                                  ``/viz/tf``             ``foxglove.FrameTransform`` world ->
+                                                          ``Raptor:RearAxleCenter``
+geometry model (Platform polls)   ``/viz/tf``             ``foxglove.FrameTransform`` vehicle
+                                                          -> every frame the model has
+laser and stereo points           ``/viz/<event>``        ``foxglove.PointCloud`` (x, y, z
+                                                          float32, in the sensor's frame)
+terrain, traversability, plan     ``/viz/<event>``        ``foxglove.Grid`` in ``world``
+maps
+ArcVoteIDL                        ``/viz/<event>``        ``foxglove.SceneUpdate``: one entity
+                                                          per behaviour, an arc per curvature
+================================  ======================  ==================================
+
+Each converter is a pure function of the body (no clock, no I/O); :class:`ViewerConverter`
+picks one per body type and remembers which sensors have a sequence form, so a laser's
+points are drawn once, not once per form.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+
+from idl import (
+    ArcVoteIDL,
+    EgoMapArrayEventIDL,
+    EtravMapArrayEventIDL,
+    MapArrayEventIDL,
+    PlanMapEventIDL,
+    PoseTransformIDL,
+    Range3dArrayEventIDL,
+    Range3dLaserIDL,
+    Range3dSeqEventIDL,
+    Range3dStereoEventIDL,
+    TimeIDL,
+    TravMapArrayEventIDL,
+)
+from idl._base import IDLModel
+
+__all__ = ["WORLD_FRAME", "VEHICLE_FRAME", "TF_TOPIC", "SCHEMAS", "ViewerMessage",
+           "ViewerConverter", "pose_in_frame", "frame_transform", "point_cloud", "grid",
+           "arc_votes", "quaternion", "viewer_topic"]
+
+#: The frame ``Pose`` events place the vehicle in (x east, y north, origin initialUTM).
+WORLD_FRAME = "world"
+#: The vehicle reference frame a Pose's HTransform is ^W T_V of (idl.PoseTransformIDL).
+VEHICLE_FRAME = "Raptor:RearAxleCenter"
+TF_TOPIC = "/viz/tf"
+#: How far an arc of ArcVoteIDL is drawn (m) and with how many points.
+ARC_LENGTH = 6.0
+ARC_POINTS = 13
+
+#: A message for a viewer channel: (topic, schema name, JSON-ready object).
+ViewerMessage = tuple[str, str, dict[str, Any]]
+
+FLOAT32 = 7  # foxglove.NumericType
+_LINE_STRIP = 0  # foxglove.LineType
+
+
+def viewer_topic(event_type: str) -> str:
+    return f"/viz/{event_type}"
+
+
+# -- the JSON schemas (written from Foxglove's documented fields) ----------------------------
+
+def _object(title: str, properties: dict[str, Any]) -> dict[str, Any]:
+    return {"title": title, "type": "object", "properties": properties,
+            "required": list(properties)}
+
+
+_NUMBER = {"type": "number"}
+_TIME = _object("time", {"sec": {"type": "integer", "minimum": 0},
+                         "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999}})
+_DURATION = _object("duration", {"sec": {"type": "integer"},
+                                 "nsec": {"type": "integer", "minimum": 0,
+                                          "maximum": 999_999_999}})
+_VECTOR3 = _object("foxglove.Vector3", {"x": _NUMBER, "y": _NUMBER, "z": _NUMBER})
+_POINT3 = _object("foxglove.Point3", {"x": _NUMBER, "y": _NUMBER, "z": _NUMBER})
+_QUATERNION = _object("foxglove.Quaternion", {"x": _NUMBER, "y": _NUMBER, "z": _NUMBER,
+                                              "w": _NUMBER})
+_POSE = _object("foxglove.Pose", {"position": _VECTOR3, "orientation": _QUATERNION})
+_COLOR = _object("foxglove.Color", {"r": _NUMBER, "g": _NUMBER, "b": _NUMBER, "a": _NUMBER})
+_NUMERIC_TYPE = {"title": "foxglove.NumericType", "oneOf": [
+    {"title": name, "const": value} for value, name in enumerate(
+        ["UNKNOWN", "UINT8", "INT8", "UINT16", "INT16", "UINT32", "INT32", "FLOAT32",
+         "FLOAT64"])]}
+_PACKED_FIELD = _object("foxglove.PackedElementField", {
+    "name": {"type": "string"}, "offset": {"type": "integer", "minimum": 0},
+    "type": _NUMERIC_TYPE})
+_BYTES = {"type": "string", "contentEncoding": "base64"}
+_LINE = _object("foxglove.LinePrimitive", {
+    "type": {"title": "foxglove.LineType", "oneOf": [
+        {"title": "LINE_STRIP", "const": 0}, {"title": "LINE_LOOP", "const": 1},
+        {"title": "LINE_LIST", "const": 2}]},
+    "pose": _POSE, "thickness": _NUMBER, "scale_invariant": {"type": "boolean"},
+    "points": {"type": "array", "items": _POINT3}, "color": _COLOR,
+    "colors": {"type": "array", "items": _COLOR},
+    "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}})
+_EMPTY_LIST = {"type": "array", "items": {"type": "object"}}
+_ENTITY = _object("foxglove.SceneEntity", {
+    "timestamp": _TIME, "frame_id": {"type": "string"}, "id": {"type": "string"},
+    "lifetime": _DURATION, "frame_locked": {"type": "boolean"},
+    "metadata": {"type": "array", "items": _object("foxglove.KeyValuePair", {
+        "key": {"type": "string"}, "value": {"type": "string"}})},
+    "arrows": _EMPTY_LIST, "cubes": _EMPTY_LIST, "spheres": _EMPTY_LIST,
+    "cylinders": _EMPTY_LIST, "lines": {"type": "array", "items": _LINE},
+    "triangles": _EMPTY_LIST, "texts": _EMPTY_LIST, "models": _EMPTY_LIST})
+
+#: Foxglove schema name -> JSON schema document.
+SCHEMAS: dict[str, dict[str, Any]] = {
+    "foxglove.PoseInFrame": _object("foxglove.PoseInFrame", {
+        "timestamp": _TIME, "frame_id": {"type": "string"}, "pose": _POSE}),
+    "foxglove.FrameTransform": _object("foxglove.FrameTransform", {
+        "timestamp": _TIME, "parent_frame_id": {"type": "string"},
+        "child_frame_id": {"type": "string"}, "translation": _VECTOR3,
+        "rotation": _QUATERNION}),
+    "foxglove.PointCloud": _object("foxglove.PointCloud", {
+        "timestamp": _TIME, "frame_id": {"type": "string"}, "pose": _POSE,
+        "point_stride": {"type": "integer", "minimum": 0},
+        "fields": {"type": "array", "items": _PACKED_FIELD}, "data": _BYTES}),
+    "foxglove.Grid": _object("foxglove.Grid", {
+        "timestamp": _TIME, "frame_id": {"type": "string"}, "pose": _POSE,
+        "column_count": {"type": "integer", "minimum": 0},
+        "cell_size": _object("foxglove.Vector2", {"x": _NUMBER, "y": _NUMBER}),
+        "row_stride": {"type": "integer", "minimum": 0},
+        "cell_stride": {"type": "integer", "minimum": 0},
+        "fields": {"type": "array", "items": _PACKED_FIELD}, "data": _BYTES}),
+    "foxglove.SceneUpdate": _object("foxglove.SceneUpdate", {
+        "deletions": {"type": "array", "items": _object("foxglove.SceneEntityDeletion", {
+            "timestamp": _TIME, "type": {"title": "foxglove.SceneEntityDeletionType",
+                                         "oneOf": [{"title": "MATCHING_ID", "const": 0},
+                                                   {"title": "ALL", "const": 1}]},
+            "id": {"type": "string"}})},
+        "entities": {"type": "array", "items": _ENTITY}}),
+}
+
+
+# -- conversions ---------------------------------------------------------------------------
+
+def _time(stamp: TimeIDL | float) -> dict[str, int]:
+    if isinstance(stamp, TimeIDL):
+        return {"sec": max(0, stamp.sec), "nsec": stamp.usec * 1000}
+    nanoseconds = max(0, round(stamp * 1e9))
+    return {"sec": nanoseconds // 1_000_000_000, "nsec": nanoseconds % 1_000_000_000}
+
+
+def quaternion(rotation: np.ndarray) -> dict[str, float]:
+    """The unit quaternion (x, y, z, w) of a 3x3 rotation matrix (w ≥ 0)."""
+    m = rotation
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        w, x = 0.25 * s, (m[2, 1] - m[1, 2]) / s
+        y, z = (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        w, x = (m[2, 1] - m[1, 2]) / s, 0.25 * s
+        y, z = (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        w, x = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s
+        y, z = 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        w, x = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s
+        y, z = (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    sign = -1.0 if w < 0 else 1.0
+    return {"x": float(sign * x / norm), "y": float(sign * y / norm),
+            "z": float(sign * z / norm), "w": float(sign * w / norm)}
+
+
+def _pose(transform: np.ndarray) -> dict[str, Any]:
+    return {"position": {"x": float(transform[0, 3]), "y": float(transform[1, 3]),
+                         "z": float(transform[2, 3])},
+            "orientation": quaternion(transform[:3, :3])}
+
+
+def pose_in_frame(pose: PoseTransformIDL) -> dict[str, Any]:
+    """``foxglove.PoseInFrame``: the vehicle in the world frame."""
+    return {"timestamp": _time(pose.time), "frame_id": WORLD_FRAME,
+            "pose": _pose(pose.HTransform)}
+
+
+def frame_transform(parent: str, child: str, transform: np.ndarray,
+                    stamp: TimeIDL | float) -> dict[str, Any]:
+    """``foxglove.FrameTransform``: ``transform`` is ^parent T_child."""
+    pose = _pose(transform)
+    return {"timestamp": _time(stamp), "parent_frame_id": parent, "child_frame_id": child,
+            "translation": pose["position"], "rotation": pose["orientation"]}
+
+
+_IDENTITY_POSE = {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                  "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
+_XYZ = [{"name": axis, "offset": 4 * k, "type": FLOAT32} for k, axis in enumerate("xyz")]
+
+
+def point_cloud(stamp: TimeIDL, frame: str, points: np.ndarray) -> dict[str, Any]:
+    """``foxglove.PointCloud`` of ``(n, 3)`` float32 points in ``frame``."""
+    data = np.ascontiguousarray(points, dtype="<f4")
+    return {"timestamp": _time(stamp), "frame_id": frame, "pose": _IDENTITY_POSE,
+            "point_stride": 12, "fields": _XYZ,
+            "data": base64.b64encode(data.data).decode("ascii")}
+
+
+def grid(body: Any, layers: Iterable[str]) -> dict[str, Any]:
+    """``foxglove.Grid`` of a map's ``layers`` (float32 each), placed in the world frame.
+
+    afa's cell [i, j] lies at map x = originX + i·g, y = originY + j·g (i along x); a
+    Foxglove grid is row-major with rows along y, so its data is the layers transposed.
+    """
+    names = list(layers)
+    stack = np.stack([np.asarray(getattr(body, n), dtype="<f4").T for n in names], axis=-1)
+    corner = np.eye(4)
+    corner[0, 3], corner[1, 3] = body.originX, body.originY
+    pose = np.asarray(body.mapPose) @ corner
+    cell = 4 * len(names)
+    return {"timestamp": _time(body.time), "frame_id": WORLD_FRAME, "pose": _pose(pose),
+            "column_count": int(body.rows), "cell_size": {"x": float(body.gridsize),
+                                                         "y": float(body.gridsize)},
+            "row_stride": cell * int(body.rows), "cell_stride": cell,
+            "fields": [{"name": n, "offset": 4 * k, "type": FLOAT32}
+                       for k, n in enumerate(names)],
+            "data": base64.b64encode(np.ascontiguousarray(stack).data).decode("ascii")}
+
+
+def _arc(curvature: float) -> list[dict[str, float]]:
+    points = []
+    for k in range(ARC_POINTS):
+        s = ARC_LENGTH * k / (ARC_POINTS - 1)
+        if abs(curvature) < 1e-9:
+            x, y = s, 0.0
+        else:
+            x = math.sin(curvature * s) / curvature
+            y = (1.0 - math.cos(curvature * s)) / curvature
+        points.append({"x": x, "y": y, "z": 0.0})
+    return points
+
+
+def arc_votes(votes: ArcVoteIDL) -> dict[str, Any]:
+    """``foxglove.SceneUpdate``: one entity per behaviour (replacing its last one), an arc
+    per candidate curvature in the vehicle frame: red when vetoed, else green by vote and
+    opaque by certainty."""
+    lines = []
+    for k, curvature in enumerate(votes.curvatures):
+        if votes.veto[k]:
+            color = {"r": 1.0, "g": 0.0, "b": 0.0, "a": 1.0}
+        else:
+            vote = float(votes.vote[k])
+            color = {"r": 1.0 - vote, "g": vote, "b": 0.2,
+                     "a": 0.25 + 0.75 * float(votes.certainty[k])}
+        lines.append({"type": _LINE_STRIP, "pose": _IDENTITY_POSE, "thickness": 2.0,
+                      "scale_invariant": True, "points": _arc(float(curvature)),
+                      "color": color, "colors": [], "indices": []})
+    entity = {"timestamp": _time(votes.time), "frame_id": VEHICLE_FRAME,
+              "id": votes.behaviour or "votes", "lifetime": {"sec": 0, "nsec": 0},
+              "frame_locked": True,
+              "metadata": [{"key": "behaviour", "value": votes.behaviour}],
+              "arrows": [], "cubes": [], "spheres": [], "cylinders": [], "lines": lines,
+              "triangles": [], "texts": [], "models": []}
+    return {"deletions": [], "entities": [entity]}
+
+
+_MAP_LAYERS: dict[type, tuple[str, ...]] = {
+    MapArrayEventIDL: ("elevation", "maxHeight", "variance"),
+    EgoMapArrayEventIDL: ("elevation", "maxHeight", "variance"),
+    TravMapArrayEventIDL: ("hazard", "goodness"),
+    EtravMapArrayEventIDL: ("hazard", "goodness"),
+    PlanMapEventIDL: ("hazard", "goodness", "aPrioriCost", "sensedCost"),
+}
+
+
+class ViewerConverter:
+    """Picks the viewer messages of each event (none for types viewers cannot draw)."""
+
+    def __init__(self) -> None:
+        self._sequence_sensors: set[tuple[str, int]] = set()
+        self._handlers: dict[type, Callable[[str, str, Any], list[ViewerMessage]]] = {
+            PoseTransformIDL: self._pose, Range3dSeqEventIDL: self._sequence,
+            Range3dArrayEventIDL: self._sequence, Range3dLaserIDL: self._static,
+            Range3dStereoEventIDL: self._static, ArcVoteIDL: self._votes,
+            **{cls: self._map for cls in _MAP_LAYERS}}
+
+    def convert(self, event_type: str, origin: str, body: IDLModel) -> list[ViewerMessage]:
+        handler = self._handlers.get(type(body))
+        return [] if handler is None else handler(event_type, origin, body)
+
+    def _pose(self, event_type: str, origin: str, pose: PoseTransformIDL
+              ) -> list[ViewerMessage]:
+        return [(viewer_topic(event_type), "foxglove.PoseInFrame", pose_in_frame(pose)),
+                (TF_TOPIC, "foxglove.FrameTransform",
+                 frame_transform(WORLD_FRAME, VEHICLE_FRAME, pose.HTransform, pose.time))]
+
+    def _sequence(self, event_type: str, origin: str, body: Any) -> list[ViewerMessage]:
+        self._sequence_sensors.add((origin, body.sensorId))
+        return [(viewer_topic(event_type), "foxglove.PointCloud",
+                 point_cloud(body.time, body.frame, body.points))]
+
+    def _static(self, event_type: str, origin: str, body: Any) -> list[ViewerMessage]:
+        if (origin, body.sensorId) in self._sequence_sensors:
+            return []  # the sequence form of the same scan is drawn already
+        return [(viewer_topic(event_type), "foxglove.PointCloud",
+                 point_cloud(body.time, body.frame, body.valid_points()))]
+
+    def _votes(self, event_type: str, origin: str, votes: ArcVoteIDL) -> list[ViewerMessage]:
+        return [(viewer_topic(event_type), "foxglove.SceneUpdate", arc_votes(votes))]
+
+    def _map(self, event_type: str, origin: str, body: Any) -> list[ViewerMessage]:
+        return [(viewer_topic(event_type), "foxglove.Grid",
+                 grid(body, _MAP_LAYERS[type(body)]))]
+
+
+def dumps(message: dict[str, Any]) -> bytes:
+    """The JSON bytes of a viewer message (finite numbers only, compact)."""
+    return json.dumps(message, separators=(",", ":"), allow_nan=False).encode()

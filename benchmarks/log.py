@@ -1,0 +1,141 @@
+"""Record and replay figures (issue 13), in one run, printed and never asserted.
+
+- recording cost: the same simulated run (teleop drive, every sensor) with and without
+  the recorder, interleaved trials, medians; target: at most 20 % slower;
+- replay of a two-minute simulated recording at ``--speed max`` (virtual time, ModelServer
+  re-run on the recorded GPS and IMU); target: at least 20x real time;
+- seeking to the middle of a ten-minute recording (the latest value of every topic
+  republished, the feeder restarted); target: under 100 ms;
+- file size per simulated minute: zstd, lz4 and no compression.
+
+Usage: ``python benchmarks/log.py [--trials N] [--trial-seconds S] [--long S] [--json]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from afa import VirtualClock  # noqa: E402
+from afa.log import Player, Recorder  # noqa: E402
+from components.simulation import RaptorSimulation  # noqa: E402
+
+CONFIG = ROOT / "configs" / "raptor.xml"
+
+
+async def simulate(seconds: float, record: Path | None = None, **options: object) -> float:
+    """Wall seconds of a simulated run (optionally recorded)."""
+    clock = VirtualClock()
+    sim = RaptorSimulation.from_xml(CONFIG, clock=clock, seed=1, teleop=True)
+    recorder = Recorder(record, **options).attach(sim.system) if record else None
+    start = time.perf_counter()
+    async with sim:
+        await sim.system.run(seconds)
+        if recorder is not None:
+            await recorder.close()
+    return time.perf_counter() - start
+
+
+async def replay(path: Path) -> tuple[float, float]:
+    """(wall seconds, recorded seconds) of a replay at max speed, opening included."""
+    start = time.perf_counter()
+    player = Player(path, CONFIG, speed=None)
+    async with player:
+        await player.run()
+    return time.perf_counter() - start, player.elapsed
+
+
+async def seek(path: Path, repeat: int) -> tuple[float, list[float]]:
+    """(open seconds, seek seconds each) to points around the middle."""
+    start = time.perf_counter()
+    player = Player(path, CONFIG, speed=None, paused=True)
+    opened = time.perf_counter() - start
+    times = []
+    async with player:
+        middle = player.reader.duration / 2
+        for k in range(repeat):
+            target = middle + (k - repeat // 2) * 7.0
+            t = time.perf_counter()
+            await player.seek(target)
+            times.append(time.perf_counter() - t)
+    return opened, times
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=3)
+    parser.add_argument("--trial-seconds", type=float, default=60.0)
+    parser.add_argument("--replay-seconds", type=float, default=120.0)
+    parser.add_argument("--long", type=float, default=600.0, help="the seek recording (s)")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    logging.disable(logging.WARNING)
+    out: dict[str, object] = {}
+    with tempfile.TemporaryDirectory() as folder:
+        tmp = Path(folder)
+        plain, recorded = [], []
+        for trial in range(args.trials):  # interleaved: load on the machine hits both
+            plain.append(asyncio.run(simulate(args.trial_seconds)))
+            recorded.append(asyncio.run(simulate(args.trial_seconds, tmp / f"t{trial}.mcap")))
+        base, rec = statistics.median(plain), statistics.median(recorded)
+        out["recording"] = {
+            "sim_seconds": args.trial_seconds, "wall_without_s": round(base, 3),
+            "wall_with_s": round(rec, 3), "speed_without": round(args.trial_seconds / base, 2),
+            "speed_with": round(args.trial_seconds / rec, 2),
+            "cost_percent": round(100 * (1 - base / rec), 1),
+            "trials_without": [round(x, 2) for x in plain],
+            "trials_with": [round(x, 2) for x in recorded]}
+        sizes = {}
+        for compression in ("zstd", "lz4", "none"):
+            path = tmp / f"size-{compression}.mcap"
+            asyncio.run(simulate(args.trial_seconds, path, compression=compression))
+            sizes[compression] = round(path.stat().st_size / 1e6 * 60 / args.trial_seconds, 1)
+        path = tmp / "size-events.mcap"
+        asyncio.run(simulate(args.trial_seconds, path, viewer=False))
+        sizes["zstd_without_viewer"] = round(path.stat().st_size / 1e6 * 60
+                                             / args.trial_seconds, 1)
+        out["mb_per_sim_minute"] = sizes
+
+        two = tmp / "two-minutes.mcap"
+        asyncio.run(simulate(args.replay_seconds, two))
+        walls = [asyncio.run(replay(two)) for _ in range(args.trials)]
+        wall = statistics.median(w for w, _ in walls)
+        out["replay_max"] = {"recorded_s": round(walls[0][1], 1), "wall_s": round(wall, 3),
+                             "times_real_time": round(walls[0][1] / wall, 1)}
+
+        ten = tmp / "ten-minutes.mcap"
+        asyncio.run(simulate(args.long, ten))
+        opened, seeks = asyncio.run(seek(ten, 5))
+        out["seek_middle"] = {"recording_s": args.long, "file_mb": round(ten.stat().st_size / 1e6),
+                              "open_ms": round(1000 * opened, 1),
+                              "seek_ms_median": round(1000 * statistics.median(seeks), 1),
+                              "seek_ms_max": round(1000 * max(seeks), 1)}
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return
+    r = out["recording"]
+    print(f"recording: {r['sim_seconds']:.0f} s simulated in {r['wall_without_s']} s without, "
+          f"{r['wall_with_s']} s with the recorder (x{r['speed_without']} -> "
+          f"x{r['speed_with']} real time): costs {r['cost_percent']} % (target <= 20 %)")
+    print(f"size per simulated minute (MB): {out['mb_per_sim_minute']}")
+    p = out["replay_max"]
+    print(f"replay --speed max of {p['recorded_s']} s: {p['wall_s']} s wall, "
+          f"x{p['times_real_time']} real time (target >= 20)")
+    s = out["seek_middle"]
+    print(f"seek to the middle of a {s['recording_s']:.0f} s recording ({s['file_mb']} MB): "
+          f"median {s['seek_ms_median']} ms, max {s['seek_ms_max']} ms (target < 100 ms); "
+          f"open {s['open_ms']} ms")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,120 @@
+"""The commands: afa run --record, afa log info|echo|recover, afa replay [--check], and
+LogNotify enabled from a configuration's Launcher."""
+
+import json
+from pathlib import Path
+
+from afa import registry
+from afa.cli import main
+from afa.log import LogReader
+from afa.log import format as fmt
+from afa.log.notify import LogNotify
+
+ROOT = Path(__file__).resolve().parents[2]
+RAPTOR = ROOT / "configs" / "raptor.xml"
+
+
+def test_run_record_then_info_echo_replay_and_check(tmp_path, capsys):
+    path = tmp_path / "run.mcap"
+    summary = tmp_path / "summary.json"
+    assert main(["run", str(RAPTOR), "--sim", "--fast", "--teleop", "--duration", "4",
+                 "--record", str(path), "--record-events", "Gps,Imu,Pose,RaptorMotion",
+                 "--summary", str(summary)]) == 0
+    recording = json.loads(summary.read_text())["recording"]
+    assert recording["events"] > 50 and recording["events_dropped"] == 0
+    capsys.readouterr()
+
+    assert main(["log", "info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "/Raptor/Gps" in out and "idl.sensors.GpsIDL@1" in out and "Hz" in out
+    assert "/afa/poll/Raptor/RaptorMotion/setJoystickVelocity" in out
+    assert "dropped: 0 event(s), 0 poll(s)" in out and "world open-field" in out
+    assert "Laser11" not in out  # --record-events chose
+
+    assert main(["log", "info", str(path), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["duration_s"] > 3 and info["metadata"]["seed"] == "0"
+
+    assert main(["log", "echo", str(path), "Pose", "--json"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    first = json.loads(lines[0])
+    assert first["origin"] == "modelServer" and "HTransform" in first["body"]
+    assert main(["log", "echo", str(path), "/afa/poll/Raptor/RaptorMotion/startVehicle"]) == 0
+    assert "startVehicle" in capsys.readouterr().out
+
+    assert main(["replay", str(path), "--speed", "max"]) == 0
+    out = capsys.readouterr()
+    assert "replayed" in out.out and "re-running modelServer" in out.err
+
+    assert main(["replay", str(path), "--check"]) == 0
+    assert "identical" in capsys.readouterr().out
+
+
+def test_bad_files_and_arguments_get_a_clear_message(tmp_path, capsys):
+    bogus = tmp_path / "bogus.mcap"
+    bogus.write_text("not a log")
+    assert main(["log", "info", str(bogus)]) == 2
+    assert "bogus.mcap: not an MCAP file" in capsys.readouterr().err
+    assert main(["replay", str(bogus)]) == 2
+    assert "bogus.mcap: not an MCAP file" in capsys.readouterr().err
+    assert main(["replay", str(bogus), "--speed", "fast"]) == 2
+    assert "--speed takes a positive number or max" in capsys.readouterr().err
+
+
+def test_recover_rewrites_a_cut_file_and_check_reports_divergence_with_exit_3(
+        recorded, tmp_path, capsys):
+    data = recorded.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    whole = tmp_path / "whole.mcap"
+    assert main(["log", "recover", str(cut), str(whole)]) == 0
+    assert "recovered from" in capsys.readouterr().out
+    with LogReader(whole) as reader:
+        assert reader.indexed and not reader.problems
+    config = RAPTOR.parent / f"_test_cli_{tmp_path.name}.xml"
+    config.write_text(RAPTOR.read_text().replace('"UseRawPose" value="true"',
+                                                 '"UseRawPose" value="false"'))
+    try:
+        assert main(["replay", str(whole), str(config), "--check"]) == 3
+    finally:
+        config.unlink()
+    out = capsys.readouterr().out
+    assert "first divergence at t=" in out and "/Raptor/Pose from modelServer" in out
+
+
+LOG_NOTIFY = """
+  <section name="LogNotifyConfig">
+    <parameter name="Afa::LogNotifyParameters">
+      <parameter name="FileName" value="{path}"/>
+      <parameter name="Events" value="Gps,Pose"/>
+    </parameter>
+  </section>
+  <section name="Launcher">
+    <parameter name="Afa::LauncherParameters">
+      <parameter name="Components">
+        <parameter>
+          <parameter name="Name" value="LogNotify"/>
+          <parameter name="Type" value="LogNotify"/>
+          <parameter name="Section" value="LogNotifyConfig"/>
+        </parameter>"""
+
+
+def test_log_notify_is_a_component_the_launcher_starts(tmp_path, capsys):
+    registry.register("LogNotify", LogNotify)  # an installed afa finds it by entry point
+    text = RAPTOR.read_text()
+    opening = text[text.index('  <section name="Launcher">'):
+                   text.index('<parameter name="Components">') + len(
+                       '<parameter name="Components">')]
+    path = tmp_path / "notify.mcap"
+    config = RAPTOR.parent / f"_test_notify_{tmp_path.name}.xml"
+    config.write_text(text.replace(opening, LOG_NOTIFY.format(path=path)))
+    try:
+        assert main(["run", str(config), "--sim", "--fast", "--teleop", "--duration", "3"]) == 0
+    finally:
+        config.unlink()
+    assert "LogNotify" in capsys.readouterr().out
+    with LogReader(path) as reader:
+        assert reader.indexed
+        assert {c.event for c in reader.topics(fmt.EVENT)} == {"Gps", "Pose"}
+        assert reader.metadata["afa"]["recorded_by"] == "LogNotify"
+        assert sum(reader.counts[c.id] for c in reader.topics(fmt.EVENT)) > 20

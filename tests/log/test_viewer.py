@@ -1,0 +1,159 @@
+"""Viewer channels: Foxglove schemas, exactly named, with the fields Foxglove documents,
+from synthetic map, vote, pose and point bodies."""
+
+import base64
+import math
+
+import numpy as np
+import pytest
+
+from afa.log import LogReader
+from afa.log import format as fmt
+from afa.log.viewer import SCHEMAS, ViewerConverter, quaternion
+from idl import (
+    ArcVoteIDL,
+    MapArrayEventIDL,
+    PlanMapEventIDL,
+    PlanningBoundaryIDL,
+    PoseTransformIDL,
+    Position3DIDL,
+    Range3dSeqEventIDL,
+    TimeIDL,
+    TravMapArrayEventIDL,
+)
+
+
+def conforms(value, schema, where="$"):
+    """A small JSON-schema check (object, required, properties, array, oneOf const)."""
+    if "oneOf" in schema:
+        assert value in [option["const"] for option in schema["oneOf"]], where
+        return
+    kind = schema.get("type")
+    if kind == "object":
+        assert isinstance(value, dict), where
+        for key in schema.get("required", []):
+            assert key in value, f"{where}.{key} missing"
+        for key, sub in schema.get("properties", {}).items():
+            if key in value:
+                conforms(value[key], sub, f"{where}.{key}")
+    elif kind == "array":
+        assert isinstance(value, list), where
+        for k, item in enumerate(value):
+            conforms(item, schema["items"], f"{where}[{k}]")
+    elif kind == "number":
+        assert isinstance(value, (int, float)) and math.isfinite(value), where
+    elif kind == "integer":
+        assert isinstance(value, int), where
+    elif kind == "string":
+        assert isinstance(value, str), where
+        if schema.get("contentEncoding") == "base64":
+            base64.b64decode(value, validate=True)
+    elif kind == "boolean":
+        assert isinstance(value, bool), where
+
+
+def header(rows=4, cols=3):
+    pose = np.eye(4)
+    pose[:2, 3] = [10.0, 20.0]
+    return dict(time=TimeIDL(sec=5, usec=250000), frame="World", mapPose=pose,
+                initialUTM=np.array([487000.0, 5568000.0, 750.0]), gridsize=0.5,
+                originX=-1.0, originY=-0.5, rows=rows, cols=cols)
+
+
+def test_a_traversability_map_is_a_grid_with_cells_where_afa_puts_them():
+    hazard = np.arange(12, dtype=np.float32).reshape(4, 3) / 12
+    body = TravMapArrayEventIDL(**header(), hazard=hazard, goodness=np.ones((4, 3), np.float32),
+                                vehiclePosition=Position3DIDL())
+    [(topic, schema, grid)] = ViewerConverter().convert("TravMap", "trav", body)
+    assert (topic, schema) == ("/viz/TravMap", "foxglove.Grid")
+    conforms(grid, SCHEMAS[schema])
+    assert grid["column_count"] == 4 and grid["cell_stride"] == 8 and grid["row_stride"] == 32
+    assert grid["pose"]["position"] == {"x": 9.0, "y": 19.5, "z": 0.0}  # mapPose · origin
+    data = np.frombuffer(base64.b64decode(grid["data"]), "<f4").reshape(3, 4, 2)
+    i, j = 2, 1  # afa cell [i, j]: x index i, y index j -> Foxglove row j, column i
+    assert data[j, i, 0] == hazard[i, j] and data[j, i, 1] == 1.0
+    assert [f["name"] for f in grid["fields"]] == ["hazard", "goodness"]
+
+
+def test_terrain_and_plan_maps_are_grids_too():
+    grid = np.full((4, 3), np.nan, np.float32)
+    grid[1, 1] = 2.0
+    terrain = MapArrayEventIDL(**header(), elevation=grid, minHeight=grid, maxHeight=grid,
+                               pointCount=np.zeros((4, 3), np.int32), variance=grid)
+    plan = PlanMapEventIDL(**header(), hazard=np.zeros((4, 3), np.float32),
+                           goodness=np.zeros((4, 3), np.float32),
+                           vehiclePosition=Position3DIDL(),
+                           aPrioriCost=np.ones((4, 3), np.float32),
+                           sensedCost=np.full((4, 3), np.inf, np.float32),
+                           planningBoundary=PlanningBoundaryIDL(minX=0, minY=0, maxX=3, maxY=2))
+    converter = ViewerConverter()
+    for body in (terrain, plan):
+        [(_, schema, message)] = converter.convert("Map", "map", body)
+        assert schema == "foxglove.Grid"
+        conforms(message, SCHEMAS[schema])
+
+
+def test_arc_votes_are_a_scene_update_of_arcs_in_the_vehicle_frame():
+    votes = ArcVoteIDL(time=TimeIDL(sec=1), behaviour="PurePursuit",
+                       curvatures=np.array([-0.2, 0.0, 0.2]), veto=np.array([True, False, False]),
+                       vote=np.array([0.0, 1.0, 0.5]), certainty=np.array([1.0, 1.0, 0.0]),
+                       maxSpeed=np.array([0.0, 2.0, 1.0]))
+    [(topic, schema, update)] = ViewerConverter().convert("ArcVote", "pp", votes)
+    assert schema == "foxglove.SceneUpdate"
+    conforms(update, SCHEMAS[schema])
+    [entity] = update["entities"]
+    assert entity["id"] == "PurePursuit" and entity["frame_id"] == "Raptor:RearAxleCenter"
+    lines = entity["lines"]
+    assert len(lines) == 3 and lines[0]["color"]["r"] == 1.0  # the vetoed arc is red
+    straight, left = lines[1]["points"], lines[2]["points"]
+    assert all(p["y"] == 0.0 for p in straight) and straight[-1]["x"] == pytest.approx(6.0)
+    assert left[-1]["y"] > 0  # positive curvature turns left
+
+
+def test_a_pose_is_a_pose_in_frame_and_a_transform_and_points_a_point_cloud():
+    yaw = 0.7
+    transform = np.eye(4)
+    transform[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
+    transform[:3, 3] = [1.0, 2.0, 3.0]
+    pose = PoseTransformIDL(time=TimeIDL(sec=3), HTransform=transform, initialUTM=np.zeros(3))
+    converter = ViewerConverter()
+    (t1, s1, in_frame), (t2, s2, tf) = converter.convert("Pose", "ms", pose)
+    assert (s1, s2) == ("foxglove.PoseInFrame", "foxglove.FrameTransform")
+    conforms(in_frame, SCHEMAS[s1])
+    conforms(tf, SCHEMAS[s2])
+    assert in_frame["pose"]["orientation"]["z"] == pytest.approx(math.sin(yaw / 2))
+    assert tf["parent_frame_id"] == "world" and tf["child_frame_id"] == "Raptor:RearAxleCenter"
+    points = np.array([[1, 2, 3], [4, 5, 6]], np.float32)
+    scan = Range3dSeqEventIDL(time=TimeIDL(sec=3), sensorId=11, frame="L:F", points=points)
+    [(_, schema, cloud)] = converter.convert("Laser11", "laser", scan)
+    conforms(cloud, SCHEMAS[schema])
+    assert np.array_equal(np.frombuffer(base64.b64decode(cloud["data"]), "<f4").reshape(-1, 3),
+                          points)
+
+
+def test_quaternions_of_rotations_about_each_axis():
+    for axis in range(3):
+        angle = 2.5
+        c, s = math.cos(angle), math.sin(angle)
+        m = np.eye(3)
+        a, b = [k for k in range(3) if k != axis]
+        m[a, a], m[a, b], m[b, a], m[b, b] = c, -s, s, c
+        q = quaternion(m)
+        sign = 1 if axis != 1 else -1  # about y the plane (z, x) turns the other way
+        assert q["xyz"[axis]] == pytest.approx(sign * math.sin(angle / 2))
+        assert q["w"] == pytest.approx(math.cos(angle / 2))
+
+
+def test_a_recorded_simulation_has_viewer_channels_with_foxglove_schema_names(recorded):
+    with LogReader(recorded) as reader:
+        viewer = {c.topic: c for c in reader.topics(fmt.VIEWER)}
+        assert viewer["/viz/Pose"].schema == "foxglove.PoseInFrame"
+        assert viewer["/viz/tf"].schema == "foxglove.FrameTransform"
+        assert viewer["/viz/Laser11"].schema == viewer["/viz/Stereo"].schema == \
+            "foxglove.PointCloud"
+        assert all(c.encoding == "json" for c in viewer.values())
+        frames = set()
+        import json
+        for message in reader.messages(channels=[viewer["/viz/tf"].id]):
+            frames.add(json.loads(message.data)["child_frame_id"])
+    assert {"FrontNoddingSICKLeft:AxleCenterFreeEnd", "Digiclops:ImagePlane"} <= frames
