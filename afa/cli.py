@@ -385,10 +385,14 @@ async def _run_system(args: argparse.Namespace) -> int:
         async with system:
             for note in system.notes:
                 print(f"afa: {note}", file=sys.stderr)
+            duration, finished = args.duration, None
+            if simulation is not None and duration is None:
+                # a simulated run ends with its mission (or drive script), or at its limit
+                duration, finished = simulation.time_limit, simulation.finished
             async with _simulating(simulation):
-                await _until_stopped(system, stop, args.duration,
+                await _until_stopped(system, stop, duration,
                                      _progress(system, simulation, clock, clock_start,
-                                               wall_start))
+                                               wall_start), finished)
             if recorder is not None:
                 await recorder.drain()
             summary = _summary(system, clock_start, wall_start)
@@ -423,6 +427,12 @@ async def _run_system(args: argparse.Namespace) -> int:
             hint = " No devices found; did you mean --sim?"
         print(f"afa run: the stack never came up: {'; '.join(down)}.{hint}", file=sys.stderr)
         return EXIT_FAILURE
+    if (simulation is not None and args.duration is None and not stop.is_set()
+            and summary.get("mode") == "autonomous" and not summary.get("mission_complete")):
+        print(f"afa run: the mission was not completed within its time limit "
+              f"({summary['waypoints_reached']}/{summary['waypoints_total']} waypoints in "
+              f"{summary['sim_time_s']:.0f} s).", file=sys.stderr)
+        return EXIT_FAILURE
     return EXIT_OK
 
 
@@ -438,17 +448,20 @@ def _simulating(simulation: Any) -> Any:
 
 
 async def _until_stopped(system: Any, stop: asyncio.Event, duration: float | None,
-                         progress: Any) -> None:
-    """Run the system until ``duration``, a signal, or a failure (raised); print progress
-    meanwhile."""
+                         progress: Any, finished: asyncio.Event | None = None) -> None:
+    """Run the system until ``duration``, a signal, ``finished``, or a failure (raised);
+    print progress meanwhile."""
     from afa.tasks import Scope
 
     async with Scope() as scope:
         runner = scope.spawn(system.run(duration), "afa-run")
         signalled = scope.spawn(stop.wait(), "afa-signal")
         reporter = scope.spawn(progress, "afa-progress")
-        done, _ = await asyncio.wait([runner, signalled], return_when=asyncio.FIRST_COMPLETED)
-        for task in (runner, signalled, reporter):
+        waiting = [runner, signalled]
+        if finished is not None:
+            waiting.append(scope.spawn(finished.wait(), "afa-finished"))
+        done, _ = await asyncio.wait(waiting, return_when=asyncio.FIRST_COMPLETED)
+        for task in (*waiting, reporter):
             task.cancel()
         for task in done:
             task.result()
@@ -495,6 +508,16 @@ def _print_summary(summary: dict[str, Any]) -> None:
               f"{len(summary['collisions'])} collision(s), waypoints "
               f"{summary['waypoints_reached']}/{summary['waypoints_total']}, pose RMS "
               f"{pose.get('rms_position_m', 'n/a')} m / {pose.get('rms_heading_deg', 'n/a')} deg")
+    if summary.get("mode") == "autonomous":
+        ratio = summary.get("path_ratio")
+        print(f"mission: {'complete' if summary['mission_complete'] else 'NOT complete'}"
+              + (f" in {summary['mission_complete_time_s']:.0f} s, "
+                 f"{summary['mission_distance_m']:.1f} m" if summary["mission_complete"]
+                 else "")
+              + (f" ({ratio:.2f}x the shortest course of {summary['oracle_distance_m']:.1f} m)"
+                 if ratio is not None else "")
+              + f"; least clearance {summary['clearance_m']} m, {summary['halts']} halt(s), "
+              f"{summary['oscillation_per_min']} steering reversals/min")
     print(f"ran {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s wall; "
           f"{events} events, {summary['events_dropped']} dropped; "
           f"{len(summary['component_errors'])} component(s) with errors")

@@ -207,6 +207,9 @@ class RaptorSimulation:
         self.expose = expose
         self.teleop = teleop or not self.world.mission.waypoints
         self.mission_complete_time: float | None = None
+        #: set when the mission's course is done (a patrol: when the loop closes again
+        #: at its first waypoint); ``afa run --sim`` stops there
+        self.finished = asyncio.Event()
         self.mission_distance: float | None = None
         self.clearance = math.inf
         self.halts = 0
@@ -350,6 +353,25 @@ class RaptorSimulation:
                 await endpoint.close()
 
     @property
+    def time_limit(self) -> float | None:
+        """Seconds the mission may take: the world's ``time-limit``, else 120 s plus 8 s
+        per metre of the straight-line course (a patrol: the closed loop); in tele-operation
+        the drive script's length and 10 s; None with neither."""
+        mission = self.world.mission
+        if self.teleop:
+            return self.world.drive_duration + 10.0 if self.world.drive else None
+        if not mission.waypoints:
+            return None
+        if mission.time_limit is not None:
+            return mission.time_limit
+        points = [(self.world.vehicle.east, self.world.vehicle.north)]
+        points += [(w.east, w.north) for w in mission.waypoints]
+        if mission.patrol:
+            points.append(points[1])
+        legs = zip(points, points[1:], strict=False)
+        return 120.0 + 8.0 * sum(math.dist(a, b) for a, b in legs)
+
+    @property
     def sim_time(self) -> float:
         return self.clock.monotonic() - self._start
 
@@ -383,6 +405,9 @@ class RaptorSimulation:
                 self.mission_distance = self.state.distance
             if self.world.mission.patrol:
                 self._next_waypoint %= len(waypoints)
+            if self.waypoints_reached == len(waypoints) + (1 if self.world.mission.patrol
+                                                           else 0):
+                self.finished.set()
 
     def _track_clearance(self) -> None:
         """The least distance from the body's outline to a hazard so far."""
@@ -455,6 +480,7 @@ class RaptorSimulation:
             except Exception as exc:  # the link may be down for a moment; keep steering
                 log.info("drive script: %s", exc)
             if t > end + 1.0 and speed == 0.0:
+                self.finished.set()
                 return
 
     # -- observation -------------------------------------------------------------------------
@@ -521,11 +547,14 @@ class RaptorSimulation:
             "clearance_m": None if math.isinf(self.clearance) else round(self.clearance, 3),
             "waypoints_reached": self.waypoints_reached,
             "waypoints_total": len(self.world.mission.waypoints),
+            "mission_complete": self.mission_complete_time is not None,
+            "time_limit_s": self.time_limit,
             "mission_complete_time_s": None if self.mission_complete_time is None
             else round(self.mission_complete_time, 3),
             "mission_distance_m": None if self.mission_distance is None
             else round(self.mission_distance, 3),
             "halts": self.halts,
+            "planning": self._planning(),
             "oscillation_per_min": round(self.steering_sign_changes / mission_minutes, 3)
             if mission_minutes > 0 else None,
             "pose_error": pose_error,
@@ -534,6 +563,18 @@ class RaptorSimulation:
                         "heading_deg": round(self.state.heading_deg, 2),
                         "speed": round(self.state.speed, 3)},
         }
+
+    def _planning(self) -> dict[str, Any]:
+        """FindPath's plans, incremental replans and planning times, per instance."""
+        from components.find_path.component import FindPath
+
+        found: dict[str, Any] = {}
+        for component in (self._system.components.values() if self._system else ()):
+            if isinstance(component, FindPath):
+                stats = component.statistics()
+                found[component.name] = {key: stats.get(key) for key in (
+                    "plans", "replans", "tracking_replans", "no_path", "plan_ms")}
+        return found
 
     def course_reference(self) -> dict[str, Any]:
         """The shortest collision-free course on the fully known world

@@ -232,6 +232,8 @@ class Mission:
 
     waypoints: tuple[Waypoint, ...] = ()
     patrol: bool = False
+    #: seconds the mission may take in a simulated run (None: the simulator's default)
+    time_limit: float | None = None
 
 
 @dataclass(frozen=True)
@@ -517,8 +519,10 @@ def _read_mission(r: _Reader, e: etree._Element | None, origin: Origin,
                   terrain: TerrainSpec) -> Mission:
     if e is None:
         return Mission()
-    r.check_attributes(e, (), ("patrol",))
+    r.check_attributes(e, (), ("patrol", "time-limit"))
     patrol = r.boolean(e, "patrol", False)
+    time_limit = (r.number(e, "time-limit", minimum=1.0) if "time-limit" in e.attrib
+                  else None)
     waypoints: list[Waypoint] = []
     for child in e:
         if child.tag != "waypoint":
@@ -545,7 +549,9 @@ def _read_mission(r: _Reader, e: etree._Element | None, origin: Origin,
             r.problem(child, f"<waypoint> at east={east:.1f} north={north:.1f} is outside "
                              "the terrain")
         waypoints.append(Waypoint(east, north, lat, lon, child.sourceline or 0))
-    return Mission(waypoints=tuple(waypoints), patrol=patrol)
+    if time_limit is not None and not math.isfinite(time_limit):
+        time_limit = None
+    return Mission(waypoints=tuple(waypoints), patrol=patrol, time_limit=time_limit)
 
 
 def _read_drive(r: _Reader, e: etree._Element | None) -> tuple[DriveCommand, ...]:
