@@ -34,7 +34,7 @@ import struct
 import sys
 from dataclasses import dataclass
 from enum import IntEnum, StrEnum
-from typing import TypeAlias
+from typing import TypeAlias, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -169,10 +169,11 @@ def _crc_contributions() -> npt.NDArray[np.uint16]:
     high half of the next one's).
     """
     def shift(x: npt.NDArray[np.uint32]) -> npt.NDArray[np.uint32]:
-        return ((x << 1) & 0xFFFF) ^ np.where(x & 0x8000, _CRC16_SICK_POLY, 0).astype(np.uint32)
+        return (((x << 1) & 0xFFFF) ^ np.where(x & 0x8000, _CRC16_SICK_POLY, 0)).astype(
+            np.uint32)
 
     low = np.arange(256, dtype=np.uint32)  # L^k(v)
-    high = low << 8  # L^k(v << 8)
+    high = (low << 8).astype(np.uint32)  # L^k(v << 8)
     table = np.empty((_CRC_SPAN, 256), dtype=np.uint16)
     table[0] = low
     for k in range(1, _CRC_SPAN):
@@ -1153,7 +1154,7 @@ def scan_line_to_points(ranges_m: npt.ArrayLike, bearings_deg: npt.ArrayLike,
             raise EOutOfBounds(f"{r.size} ranges but {mask.size} validity flags")
         keep &= mask
     with np.errstate(invalid="ignore"):
-        return ScanLineGeometry(b).points(r, nod_deg)[keep]
+        return cast(npt.NDArray[np.float64], ScanLineGeometry(b).points(r, nod_deg)[keep])
 
 
 def nod_scan_to_points(scan: NodScan, *, offset_deg: float = 0.0,
