@@ -107,6 +107,7 @@ class StreamDecoder(ABC, Generic[M]):
         self._max_buffer = max_buffer
         self._skipping = False
         self._searched = 0
+        self._front = 0  # stream offset of the first buffered byte
         self.stats = DecoderStatistics()
 
     @abstractmethod
@@ -125,6 +126,7 @@ class StreamDecoder(ABC, Generic[M]):
                 self._searched = min(result.searched, len(buffer))
                 break
             del buffer[: result.consumed]  # amortised O(1): see the module docstring
+            self._front += result.consumed
             self._searched = 0
             if result.fault is None:
                 self._skipping = False
@@ -135,6 +137,7 @@ class StreamDecoder(ABC, Generic[M]):
         if len(buffer) > self._max_buffer:
             excess = len(buffer) - self._max_buffer
             del buffer[:excess]
+            self._front += excess
             self._searched = 0
             self._count_fault(Fault.OVERFLOW, excess)
         return messages
@@ -169,11 +172,12 @@ class StreamDecoder(ABC, Generic[M]):
     def front_position(self) -> int:
         """Stream offset of the first buffered byte: every byte fed before it has been
         consumed, skipped or dropped. Lets a decoder recognise a front it has seen."""
-        return self.stats.bytes_in - len(self._buffer)
+        return self._front
 
     def reset(self) -> None:
         """Forget buffered bytes (after a reconnect); statistics are kept. A decoder that
         keeps state about the stream overrides this and calls ``super().reset()``."""
+        self._front += len(self._buffer)
         self._buffer.clear()
         self._skipping = False
         self._searched = 0
