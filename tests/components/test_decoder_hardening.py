@@ -215,6 +215,9 @@ def _controller_header(length: int) -> bytes:
     return encode_controller_frame(0x01, bytes(length))[:10]
 
 
+_NOT_ACK = bytes(b for b in range(256) if b not in (ACK, NAK))
+
+
 def _printable(rng: random.Random, n: int, exclude: bytes = b"") -> bytes:
     alphabet = bytes(b for b in range(0x20, 0x7F) if b not in exclude)
     return bytes(rng.choices(alphabet, k=n))
@@ -290,7 +293,9 @@ CASES = [
           encode_measured_values(MeasuredValues(tuple(range(1000, 1361)))),
           encode_switch_variant(180, 50), b"\x15"),
          (b"\x02", b"\x06", b"\x15", b"\x02\x80", b"\x02\x00"),
-         lambda rng: b"\x02\x80\x2c\x03" + rng.randbytes(12),
+         # heads claiming 812 bytes, and heads with LEN 0, in data without 0x06/0x15
+         lambda rng: (b"\x02\x80\x2c\x03" + bytes(rng.choices(_NOT_ACK, k=12))
+                      + b"\x02\x00\x00\x00"),
          budget=128),
     Case(NodControllerDecoder,
          (encode_controller_message(ControllerStatus(1, 0, -5, -40, -10, 15, 99, seq=1)),
