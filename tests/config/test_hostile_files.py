@@ -15,7 +15,9 @@ never another exception, never unbounded memory or work:
 from __future__ import annotations
 
 import copy
+import importlib
 import os
+import pkgutil
 import random
 import re
 import shutil
@@ -27,7 +29,7 @@ from typing import Any
 import pytest
 from lxml import etree
 
-from afa import registry
+import components
 from afa.config.loader import load_configuration
 from afa.config.miro import MAX_ELEMENTS, MAX_FILE_BYTES, read_bounded
 from afa.errors import ConfigError
@@ -52,7 +54,11 @@ CONFIGS = ROOT / "configs"
 WORLDS = sorted((CONFIGS / "worlds").glob("*.xml"))
 ASSEMBLY = CONFIGS / "050917raptor01.XML"
 
-registry.load_all()  # every parameter model, so the configuration validates fully
+# Every parameter model of this tree, so the configuration validates fully (imported
+# directly: the installed entry points may name components of another checkout).
+for _module in pkgutil.iter_modules(components.__path__):
+    if _module.ispkg:
+        importlib.import_module(f"components.{_module.name}.parameters")
 
 
 def _loads_or_config_error(load: Callable[[Path], Any], path: Path,
