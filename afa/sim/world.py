@@ -369,6 +369,11 @@ class _Reader:
             self.omitted += 1
             self._omitted_line = self._omitted_line or line
 
+    @property
+    def count(self) -> int:
+        """Problems found so far, listed or not."""
+        return len(self.problems) + self.omitted
+
     def all_problems(self) -> list[str]:
         """The problems, with a last line counting those beyond :data:`MAX_PROBLEMS`."""
         if not self.omitted:
@@ -616,14 +621,14 @@ def _read_obstacle(r: _Reader, e: etree._Element, terrain: TerrainSpec) -> Obsta
     required, optional = _OBSTACLE_FIELDS[kind]
     ok = r.check_attributes(e, ("type",) + required, optional)
     r.no_children(e)
-    before = len(r.problems)
+    before = r.count
     values = {"east": r.number(e, "east"), "north": r.number(e, "north")}
     for name in required[2:] + optional:
         if name == "heading":
             values[name] = r.number(e, name, 0.0, minimum=-360.0, maximum=360.0)
         else:
             values[name] = r.number(e, name, positive=True, maximum=_SIZE_LIMITS[name])
-    if not ok or len(r.problems) > before or any(math.isnan(v) for v in values.values()):
+    if not ok or r.count > before or any(math.isnan(v) for v in values.values()):
         return None
     obstacle = Obstacle(type=kind, line=e.sourceline or 0, **values)  # type: ignore[arg-type]
     if _sized(terrain) and not _on_terrain(terrain, obstacle.east, obstacle.north):
@@ -696,13 +701,13 @@ def _read_drive(r: _Reader, e: etree._Element | None) -> tuple[DriveCommand, ...
         if not r.check_attributes(child, ("time", "speed", "steering")):
             continue
         r.no_children(child)
-        before = len(r.problems)
+        before = r.count
         command = DriveCommand(time=r.number(child, "time", minimum=0.0,
                                              maximum=MAX_DRIVE_TIME),
                                speed=r.number(child, "speed", minimum=-10.0, maximum=10.0),
                                steering=r.number(child, "steering", minimum=-90.0, maximum=90.0),
                                line=child.sourceline or 0)
-        if len(r.problems) > before:
+        if r.count > before:
             continue
         if commands and command.time <= commands[-1].time:
             r.problem(child, f"<command> time={command.time:g} must be later than the "

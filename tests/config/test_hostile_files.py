@@ -447,3 +447,13 @@ def test_configuration_element_count_is_bounded(tmp_path: Path) -> None:
     first_excess = list(etree.parse(path, parser).getroot().iter())[MAX_ELEMENTS]
     assert error.problems == [f"{path}:{first_excess.sourceline}: more than {MAX_ELEMENTS} "
                               "elements (the limit; the Raptor's configuration has 400)"]
+
+
+def test_a_world_lists_at_most_a_hundred_problems(tmp_path: Path) -> None:
+    bad = '  <obstacle type="cylinder" east="x" north="0" radius="1" height="1"/>\n'
+    path = _world(tmp_path, bad * 500)
+    error = _load_error(load_world, path)
+    assert len(error.problems) == 101
+    first_omitted = _line(path, "<obstacle") + 100
+    assert error.problems[-1] == (f"{path}:{first_omitted}: ... and 400 more problems (only "
+                                  "the first 100 are listed)")
