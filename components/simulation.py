@@ -38,6 +38,7 @@ from afa import ByteStream, Clock, EDevIO, Event, SerialSpec, System, TcpSpec, r
 from afa.component import Component
 from afa.ports import Direction, interface_name
 from afa.sim.oracle import HazardField, shortest_course
+from afa.sim.stats import RunningError
 from afa.sim.terrain import Terrain
 from afa.sim.vehicle import Vehicle, VehicleState
 from afa.sim.world import World, load_world
@@ -224,7 +225,7 @@ class RaptorSimulation:
         self.waypoints_reached = 0
         self._next_waypoint = 0
         self._digest = hashlib.sha256()
-        self._pose_errors: list[tuple[float, float]] = []
+        self._pose_errors = RunningError()  # constant memory however long the run
         self.fakes: list[Any] = []
         self.endpoints: dict[str, str] = {}  # component -> pty path or host:port
         self._shared: dict[str, Any] = {}
@@ -522,21 +523,13 @@ class RaptorSimulation:
         east = pose.HTransform[0, 3] + pose.initialUTM[0]
         north = pose.HTransform[1, 3] + pose.initialUTM[1]
         yaw = math.atan2(pose.HTransform[1, 0], pose.HTransform[0, 0])
-        self._pose_errors.append((math.hypot(east - utm.easting_m, north - utm.northing_m),
-                                  math.degrees(math.remainder(yaw - grid_yaw, 2 * math.pi))))
+        self._pose_errors.add(self.sim_time,
+                              math.hypot(east - utm.easting_m, north - utm.northing_m),
+                              math.degrees(math.remainder(yaw - grid_yaw, 2 * math.pi)))
 
     def summary(self) -> dict[str, Any]:
         """The simulation's part of the run summary."""
-        errors = np.array(self._pose_errors) if self._pose_errors else None
-        pose_error: dict[str, Any] | None = None
-        if errors is not None:
-            settled = errors[len(errors) // 10:]  # after the filter's first seconds
-            pose_error = {
-                "samples": int(len(errors)),
-                "rms_position_m": round(float(np.sqrt(np.mean(settled[:, 0] ** 2))), 4),
-                "max_position_m": round(float(np.max(settled[:, 0])), 4),
-                "rms_heading_deg": round(float(np.sqrt(np.mean(settled[:, 1] ** 2))), 4),
-            }
+        pose_error = self._pose_errors.summary()  # after the filter's first seconds
         mission_minutes = (self.mission_complete_time or self.sim_time) / 60.0
         return {
             "world": self.world.name,
