@@ -68,7 +68,7 @@ class CostGrid:
         self.revision = plan.revision
         self.inflation, self.margin, self.margin_cost = inflation, margin, margin_cost
         self.raw = plan.planning_cost().astype(np.float64)
-        b = plan.planningBoundary
+        b = self.boundary = plan.planningBoundary
         self.inside = np.zeros(self.raw.shape, dtype=bool)
         self.inside[b.minX:b.maxX + 1, b.minY:b.maxY + 1] = True
         self.cost = self._grow(self.raw, self.inside)
@@ -225,9 +225,12 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         window = await self.global_map.getPlanMapChanges(self.grid.revision)
         if window is None:
             return self.grid
-        if window.fullRows == 0 and window.rows * window.cols != self.grid.raw.size:
+        if (window.fullRows == 0 and window.rows * window.cols != self.grid.raw.size) or \
+                window.planningBoundary != self.grid.boundary:
+            if window.fullRows:  # a window of a map with new limits: fetch the whole
+                window = await self.global_map.getPlanMap()
             self.grid = CostGrid(window, p.InflationRadius, p.MarginRadius, p.MarginCost)
-            self.planner = None  # another map: plan afresh
+            self.planner = None  # another map or other limits: plan afresh
             return self.grid
         xs, ys, new = self.grid.apply(window)
         if self.planner is not None and len(xs):
