@@ -11,33 +11,19 @@ path 1.5 m ahead of the lasers.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
-import pytest
+from vehicle_rig import Cruise, SerialLine, decode_host_bytes, stops_after, wire_commands
 
 from afa import System, VirtualClock
 from afa.testing import until
-from components.arcs import ArcSet, ArcVotes
+from components.model_server.geometry import GeometryModel
 from components.mpc555.codec import SetVelocity
 from components.mpc555.fake import FakeMpc555
-from components.model_server import ModelServer
-from components.model_server.geometry import GeometryModel
-from components.model_server.parameters import ModelServerParameters
 from components.nodding_laser.component import LASER_FRAMES, SCAN_PERIODS
 from components.nodding_laser.fake import FakeNodLaser
-from components.obstacle_detection import ObstacleDetection
-from components.obstacle_detection.parameters import ObstacleDetectionParameters
-from idl import (
-    ArcDecisionIDL,
-    ArcVoteIDL,
-    Range3dLaserIDL,
-    Range3dSeqEventIDL,
-    TimeIDL,
-)
 from idl import VehicleControl as VehicleControlInterface
-from vehicle_rig import Cruise, SerialLine, decode_host_bytes, stops_after, wire_commands
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "raptor.xml"
