@@ -199,3 +199,16 @@ async def test_a_gate_wider_than_the_vehicle_is_threaded():
     hazard[wall, column(-1.0):column(1.0)] = 0.0  # 2 m: the design gate of components/arcs
     vote = await scored(hazard)
     assert not vote.veto[len(vote.curvatures) // 2]
+
+
+async def test_maps_in_a_frame_modelserver_does_not_know_are_ignored_and_reported():
+    async with running() as (system, clock, votes):
+        oa = system.components["obsAvoid"]
+        await clock.advance(1.0)
+        body = ego_map(clear(), clock.now()).model_copy(update={"frame": "NoSuchBody:Frame"})
+        system.channel.publish("Raptor", "TraverseEgo", body)
+        await clock.advance(0.5)
+        assert drain(votes) == []
+        assert oa.statistics()["unknown_frames"] == 1
+        health = oa.health()
+        assert not health.healthy and "NoSuchBody:Frame" in health.detail

@@ -11,9 +11,13 @@ path 1.5 m ahead of the lasers.
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import pytest
 from vehicle_rig import Cruise, SerialLine, decode_host_bytes, stops_after, wire_commands
 
 from afa import System, VirtualClock
@@ -23,6 +27,7 @@ from components.mpc555.codec import SetVelocity
 from components.mpc555.fake import FakeMpc555
 from components.nodding_laser.component import LASER_FRAMES, SCAN_PERIODS
 from components.nodding_laser.fake import FakeNodLaser
+from idl import Range3dLaserIDL, Range3dSeqEventIDL, TimeIDL
 from idl import VehicleControl as VehicleControlInterface
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -149,3 +154,120 @@ def _drain(subscription) -> list:
     while (event := subscription.get_nowait()) is not None:
         events.append(event)
     return events
+
+
+# --------------------------------------------------------------------------- through the ports
+
+def scan_of(points_vehicle: np.ndarray, laser_id: int = 11, t: float = 0.0,
+            array: bool = False) -> Range3dSeqEventIDL | Range3dLaserIDL:
+    """A scan line whose points, in the laser's frame, lie at ``points_vehicle``: (x ahead
+    of the laser, y left of the vehicle's centre line, height above the ground)."""
+    mount = GEOMETRY.transformation(VEHICLE, LASER_FRAMES[laser_id])
+    offset = np.array([0.0, mount[1, 3], NOD_AXIS_HEIGHT])
+    local = (np.asarray(points_vehicle, dtype=np.float64) - offset) @ mount[:3, :3]
+    header = {"time": TimeIDL.from_seconds(t), "sensorId": laser_id,
+              "frame": LASER_FRAMES[laser_id]}
+    if array:
+        return Range3dLaserIDL(**header, points=local.astype(np.float32),
+                               valid=np.ones(len(local), dtype=bool))
+    return Range3dSeqEventIDL(**header, points=local.astype(np.float32))
+
+
+def returns(count: int, *, ahead: float = 1.5, height: float = 1.0, side: float = 0.0
+            ) -> np.ndarray:
+    """``count`` returns on a small object ``ahead`` m in front of the laser."""
+    y = side + np.linspace(-0.1, 0.1, count) if count > 1 else np.full(count, side)
+    return np.stack([np.full(count, ahead), y, np.full(count, height)], axis=1)
+
+
+GROUND = np.stack([np.linspace(1.0, 6.0, 40), np.linspace(-0.6, 0.6, 40), np.zeros(40)],
+                  axis=1)
+
+
+@asynccontextmanager
+async def detection() -> AsyncIterator[tuple[System, VirtualClock, Any, Any]]:
+    clock = VirtualClock(start=0.0)
+    system = System.from_xml(CONFIG, clock=clock, only=["LaserSafetyService", "modelServer"])
+    async with system:
+        votes = system.channel.subscribe("Raptor", "ArcVote", maxsize=1024)
+        yield system, clock, votes, system.components["LaserSafetyService"]
+
+
+def publish(system: System, scan: Any, event: str = "Laser11") -> None:
+    system.channel.publish("Raptor", event, scan, origin="test")
+
+
+async def test_a_halt_vetoes_every_arc_then_holds_for_reset_counter_scans_and_rechecks():
+    async with detection() as (system, clock, votes, od):
+        p = od.parameters
+        obstacle = np.concatenate([GROUND, returns(p.NumHitsTolerance)])
+        await clock.advance(1.0)
+        publish(system, scan_of(GROUND))
+        await clock.advance(0.0266)
+        (clear,) = _drain(votes)
+        assert not clear.body.veto.any() and not clear.body.certainty.any()
+        publish(system, scan_of(obstacle))
+        await clock.advance(0.0266)
+        (halt,) = _drain(votes)
+        assert halt.body.behaviour == "ObstacleDetection" and halt.body.veto.all()
+        assert halt.body.curvatures.tolist() == od.arcs.curvatures.tolist()
+        # the next ResetCounter scans are not checked: nothing is published
+        for _ in range(p.ResetCounter):
+            publish(system, scan_of(obstacle))
+            await clock.advance(0.0266)
+        assert _drain(votes) == []
+        # then it checks again: still there, halt again; gone, a clear vote
+        publish(system, scan_of(obstacle))
+        await clock.advance(0.0266)
+        assert [e.body.veto.all() for e in _drain(votes)] == [True]
+        for _ in range(p.ResetCounter):
+            publish(system, scan_of(GROUND))
+            await clock.advance(0.0266)
+        publish(system, scan_of(GROUND))
+        await clock.advance(0.0266)
+        assert [e.body.veto.any() for e in _drain(votes)] == [False]
+        assert od.statistics()["halts"] == 2
+
+
+@pytest.mark.parametrize(("what", "points", "halts"), [
+    ("a post ahead", returns(5), True),
+    ("noise below NumHitsTolerance", returns(4), False),
+    ("a ditch ahead", returns(8, height=-0.6), True),
+    ("a shallow dip", returns(8, height=-0.2), False),
+    ("a post beside the corridor", returns(8, side=1.5), False),
+    ("a post beyond SafetyDist", returns(8, ahead=4.0), False),
+    ("a low stone", returns(8, height=0.2), False),
+])
+async def test_what_halts_and_what_does_not(what, points, halts):
+    async with detection() as (system, clock, votes, od):
+        p = od.parameters
+        # the configured thresholds these cases sit on either side of
+        assert p.NumHitsTolerance == 5 and p.SafetyHeight == p.SafetyDepth == 0.3
+        assert p.SafetyDist == 3.0 and p.VehicleWidth / 2 < 1.5
+        await clock.advance(1.0)
+        publish(system, scan_of(np.concatenate([GROUND, points])))
+        await clock.advance(0.0266)
+        (vote,) = _drain(votes)
+        assert bool(vote.body.veto.all()) is halts, what
+
+
+async def test_both_scan_forms_and_both_lasers_are_checked():
+    async with detection() as (system, clock, votes, od):
+        await clock.advance(1.0)
+        publish(system, scan_of(np.concatenate([GROUND, returns(6)]), laser_id=12,
+                                array=True), event="Laser12")
+        await clock.advance(0.0266)
+        (vote,) = _drain(votes)
+        assert vote.body.veto.all()
+
+
+async def test_scans_in_a_frame_modelserver_does_not_know_are_ignored_and_counted():
+    async with detection() as (system, clock, votes, od):
+        await clock.advance(1.0)
+        scan = scan_of(np.concatenate([GROUND, returns(6)]))
+        publish(system, scan.model_copy(update={"frame": "NoSuchBody:Frame"}))
+        await clock.advance(0.0266)
+        assert _drain(votes) == []
+        assert od.statistics()["unknown_frames"] == 1
+        health = od.health()  # blind to that laser: not healthy, and it says why
+        assert not health.healthy and "NoSuchBody:Frame" in health.detail
