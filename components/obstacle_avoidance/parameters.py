@@ -80,6 +80,12 @@ class ObstacleAvoidanceParameters(Parameters):
         description="afa addition: where along the body (m ahead of the rear axle) a disc "
                     "of VehicleRadius is swept along each arc; together they cover the "
                     "body from the rear axle to the front bumper")
+    VetoDistance: Annotated[float, Field(gt=0)] = param(
+        2.5, unit="m",
+        description="afa addition: an arc is vetoed when its first obstacle lies within "
+                    "this much rear-axle travel; a farther obstacle only shortens its free "
+                    "distance (and its vote). inf: any obstacle within the horizon vetoes, "
+                    "which leaves no arc to turn on in a tight spot")
 
     @model_validator(mode="after")
     def _ranges(self) -> ObstacleAvoidanceParameters:

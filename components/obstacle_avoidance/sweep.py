@@ -53,7 +53,12 @@ Scoring (interpretation of Table A.10, decisions in docs/decisions/draft-arcs.md
   behaviour), or an unknown (NaN) cell when ``VetoUnknownCells``.
 - **Veto**: an arc whose discs touch an obstacle within its horizon and the evaluated
   rows (the seed's Figure 10: "vetoed because of the discrete obstacles in their path").
-  ``FarZone`` is how far that reaches.
+  ``FarZone`` is how far that reaches, and ``VetoDistance`` (an afa addition, 2.5 m;
+  inf: any obstacle within the horizon) how much rear-axle travel before the obstacle
+  still vetoes: beyond it the obstacle only shortens the free distance. Vetoing a half
+  circle for a wall it would meet 10 m on leaves a vehicle in a tight spot (a
+  cul-de-sac, a forest) with no arc to turn on, although it re-decides every half
+  second long before it gets there.
 - **Obstacle distance** d_obs: the reach of the first obstacle (inf if none).
 - **Free distance** d_free: the reach of the first obstacle, or of the first unknown
   cell when ``CostUnknownCells`` (unknown ground is a cost: it ends the distance known to
@@ -391,7 +396,7 @@ class ArcSweepScorer:
         else:
             clear = self._certainty_ones
         vote = clear * (1.0 - rough)  # both factors in 0..1
-        veto = hit
+        veto = hit & (obstacle_distance <= p.VetoDistance)
         if p.DiscountSpeeds:
             speed = p.MinVelocity + (p.MaxVelocity - p.MinVelocity) * vote
         else:

@@ -19,14 +19,17 @@ vehicle was at the first update after :meth:`PurePursuit.set_waypoints`; in patr
 it continues w_last → w0 → w1 … for ever. Target ``i`` is the waypoint being sought; the
 *current segment* runs from the previous waypoint (or the anchor) to it.
 
-Look-ahead point, chosen by distance along the path
---------------------------------------------------
-Project the vehicle onto the current segment (clamped to the segment), walk ``lookahead``
-metres along the polyline from there, continuing onto the following segments at segment
-ends. Without patrol, the walk continues past the last waypoint along the last segment's
-direction: the goal never pulls the look-ahead point in, so near the goal the vehicle
-keeps tracking the final line instead of spiralling onto the point (one of the failure
-modes in notes/algorithms.md).
+Look-ahead point, on the line to the target
+-------------------------------------------
+Project the vehicle onto the line of the current segment and take the point
+``lookahead`` metres further along that line, beyond the target if need be (clamped to
+the segment's start behind it). The look-ahead never walks round the corner onto the
+next segment: the vehicle tracks the line *through* the waypoint, so it passes the
+waypoint within its tolerance instead of cutting the corner (every waypoint is a place
+the operator asked the vehicle to visit, and the Global Map, FindPath and the mission's
+judge count it reached only within its tolerance), and near the goal the point runs
+past the goal instead of pulling in, so the vehicle does not spiral onto it (one of the
+failure modes in notes/algorithms.md).
 
 Curvature
 ---------
@@ -42,18 +45,13 @@ gives κ* = 0.
 Waypoint advance
 ----------------
 The target advances (to the next waypoint, or to w0 after w_last on patrol; several in
-one update if need be) when the vehicle is
-
-1. within the target's tolerance, or
-2. past the perpendicular of the target at the segment end (projection parameter ≥ 1)
-   and within ``lookahead`` of it: cutting a corner with the look-ahead on the next
-   segment counts as passing the via-point, and the vehicle does not circle back to hit
-   a tolerance it just missed (oscillation, stalling near the goal).
-
-Past the perpendicular but farther than ``lookahead`` (a long detour round an obstacle),
-the via-point is *not* skipped: the look-ahead point becomes the waypoint itself, and the
-vehicle turns back to it. After the last waypoint of a non-patrol list the behaviour is
-*finished*. Patrol needs at least two waypoints; with one it finishes like a plain list.
+one update if need be) when the vehicle is within the target's tolerance: the one rule
+the Global Map (which FindPath plans to) uses too, so the behaviours never disagree on
+the waypoint sought. Past the target's perpendicular without having reached it (a
+detour round an obstacle), the look-ahead point becomes the waypoint itself and the
+vehicle turns back to it rather than skipping it. After the last waypoint of a
+non-patrol list the behaviour is *finished*. Patrol needs at least two waypoints; with
+one it finishes like a plain list.
 
 Votes (seed Figure 12)
 ----------------------
@@ -339,15 +337,9 @@ class PurePursuit:
         advanced: list[int] = []
         n = len(self._waypoints)
         for _ in range(n):
-            a, b = self._segment(self._target)
+            _, b = self._segment(self._target)
             w = self._waypoints[self._target]
-            distance = math.hypot(x - b[0], y - b[1])
-            ex, ey = b[0] - a[0], b[1] - a[1]
-            length2 = ex * ex + ey * ey
-            passed = (length2 > 0.0
-                      and ((x - a[0]) * ex + (y - a[1]) * ey) / length2 >= 1.0
-                      and distance <= self.settings.lookahead)
-            if not (distance <= w.tolerance or passed):
+            if math.hypot(x - b[0], y - b[1]) > w.tolerance:
                 break
             advanced.append(self._target)
             self._previous = b
@@ -360,45 +352,18 @@ class PurePursuit:
                 break
         return tuple(advanced)
 
-    def _polyline_after(self, target: int) -> list[tuple[float, float]]:
-        """The waypoints after ``target`` that a look-ahead walk may reach, in order."""
-        n = len(self._waypoints)
-        if self._patrol and n >= 2:
-            order = [(target + i) % n for i in range(1, n + 1)]
-        else:
-            order = list(range(target + 1, n))
-        return [(self._waypoints[i].x, self._waypoints[i].y) for i in order]
-
     def _lookahead_point(self, x: float, y: float) -> tuple[float, float]:
         a, b = self._segment(self._target)
         ex, ey = b[0] - a[0], b[1] - a[1]
-        length2 = ex * ex + ey * ey
-        t = ((x - a[0]) * ex + (y - a[1]) * ey) / length2 if length2 > 0.0 else 1.0
-        if t >= 1.0 and math.hypot(x - b[0], y - b[1]) > self.settings.lookahead:
-            return b  # passed far off: go back to the via-point rather than skip it
-        t = min(max(t, 0.0), 1.0)
-        start = (a[0] + t * ex, a[1] + t * ey)
-        remaining = self.settings.lookahead
-        nodes = [b, *self._polyline_after(self._target)]
-        direction: tuple[float, float] | None = None
-        for node in nodes:
-            dx, dy = node[0] - start[0], node[1] - start[1]
-            length = math.hypot(dx, dy)
-            if length > 0.0:
-                direction = (dx / length, dy / length)
-                if remaining <= length:
-                    return (start[0] + remaining * direction[0],
-                            start[1] + remaining * direction[1])
-                remaining -= length
-            start = node
-        if direction is None:  # every remaining segment has zero length
-            if length2 > 0.0:
-                norm = math.sqrt(length2)
-                direction = (ex / norm, ey / norm)
-            else:
-                return start
-        # Past the last waypoint (no patrol): extend the last segment's line.
-        return start[0] + remaining * direction[0], start[1] + remaining * direction[1]
+        length = math.hypot(ex, ey)
+        if length == 0.0:
+            return b
+        ux, uy = ex / length, ey / length
+        t = (x - a[0]) * ux + (y - a[1]) * uy  # metres along the segment
+        if t >= length:
+            return b  # past it without reaching it: go back to it rather than skip it
+        t = max(t, 0.0) + self.settings.lookahead  # on the line, beyond b if need be
+        return a[0] + t * ux, a[1] + t * uy
 
     def _distance_to_goal(self, x: float, y: float) -> float:
         if self._patrol and len(self._waypoints) >= 2:

@@ -273,8 +273,6 @@ async def test_scans_in_a_frame_modelserver_does_not_know_are_ignored_and_counte
         assert not health.healthy and "NoSuchBody:Frame" in health.detail
 
 
-@pytest.mark.xfail(strict=True, reason="configs/raptor.xml keeps Table A.11's VehicleWidth "
-                                       "1 m: the corridor is narrower than the 1.4 m Raptor")
 async def test_the_corridor_covers_the_vehicles_width():
     """A post 0.6 m off the centre line, 1.5 m ahead: the Raptor's 1.4 m body would hit
     it, so the safety catch must halt."""

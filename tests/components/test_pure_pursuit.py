@@ -104,13 +104,14 @@ def test_beside_the_path_the_curvature_is_2y_over_d_squared(arcs):
 # --- the look-ahead walk and waypoint advance -------------------------------------------
 
 
-def test_the_lookahead_walks_round_the_corner_onto_the_next_segment(arcs):
+def test_the_lookahead_stays_on_the_line_through_the_target_until_it_is_reached(arcs):
     pp = started(arcs, [Waypoint(10.0, 0.0, 1.0), Waypoint(10.0, 10.0, 1.0)])
-    out = pp.update(8.0, 0.0, 0.0)  # 2 m before the corner: 3 m up the next segment
-    assert out.lookahead_point == pytest.approx((10.0, 3.0))
-    assert out.target == 0 and out.advanced == ()
-    assert 2 * 3.0 / (2.0**2 + 3.0**2) > arcs.max_curvature
-    assert out.curvature == arcs.max_curvature  # 2y/D² = 0.46, clipped
+    out = pp.update(8.0, 0.0, 0.0)  # 2 m before the corner: 3 m beyond it on the line
+    assert out.lookahead_point == pytest.approx((13.0, 0.0))
+    assert out.target == 0 and out.advanced == () and out.curvature == 0.0
+    out = pp.update(8.0, 0.5, 0.0)  # beside the line: pursue the line, not the corner
+    assert out.lookahead_point == pytest.approx((13.0, 0.0))
+    assert out.curvature == pytest.approx(2 * -0.5 / (5.0**2 + 0.5**2))
 
 
 def test_a_waypoint_within_its_tolerance_is_passed(arcs):
@@ -122,10 +123,11 @@ def test_a_waypoint_within_its_tolerance_is_passed(arcs):
     assert out.lookahead_point == pytest.approx((10.0, 0.3 + 5.0))
 
 
-def test_passing_the_perpendicular_near_a_waypoint_counts_as_passing_it(arcs):
+def test_passing_beside_a_via_point_outside_its_tolerance_is_not_reaching_it(arcs):
     pp = started(arcs, [Waypoint(10.0, 0.0, 1.0), Waypoint(10.0, 10.0, 1.0)])
     out = pp.update(10.5, 3.0, math.pi / 2)  # cut the corner: 3.04 m from it, past it
-    assert out.advanced == (0,) and out.target == 1
+    assert out.advanced == () and out.target == 0
+    assert out.lookahead_point == (10.0, 0.0)  # turn back to it
 
 
 def test_a_via_point_passed_far_off_is_sought_not_skipped(arcs):
@@ -151,8 +153,8 @@ def test_the_square_is_driven_in_order_without_skipping_or_oscillating(arcs):
     assert log[-1][3].state == "finished" and pp.finished
     assert advanced(log) == [0, 1, 2, 3]
     xy = np.array([(x, y) for x, y, *_ in log])
-    for w in square:  # corners are cut by less than the tolerance (2 m) plus a margin
-        assert np.min(np.hypot(xy[:, 0] - w.x, xy[:, 1] - w.y)) < 2.5
+    for w in square:  # every corner visited within its tolerance (2 m), none cut
+        assert np.min(np.hypot(xy[:, 0] - w.x, xy[:, 1] - w.y)) <= w.tolerance
     # along each side the steering settles: few sign changes of the chosen curvature
     kappas = [o.curvature for *_, o in log if o.state == "following"]
     signs = np.sign([k for k in kappas if abs(k) > 1e-3])
@@ -178,20 +180,24 @@ def test_patrol_loops_back_to_the_first_waypoint(arcs):
     triangle = [Waypoint(15.0, 0.0), Waypoint(15.0, 15.0), Waypoint(0.0, 0.0)]
     pp = PurePursuit(arcs, SETTINGS)
     pp.set_waypoints(triangle, patrol=True)
-    log = drive(pp, arcs, (0.0, 0.0, 0.0), 600)
+    log = drive(pp, arcs, (0.0, 0.0, 0.0), 800)
     assert all(o.state == "following" for *_, o in log)
     assert advanced(log)[:7] == [0, 1, 2, 0, 1, 2, 0]
     assert all(math.isinf(o.distance_to_goal) for *_, o in log)
 
 
-def test_on_patrol_the_lookahead_wraps_onto_the_first_segment(arcs):
+def test_on_patrol_the_target_wraps_to_the_first_waypoint(arcs):
     pp = started(arcs, [Waypoint(10.0, 0.0), Waypoint(10.0, 10.0), Waypoint(0.0, 10.0)],
                  patrol=True)
     assert pp.update(10.0, 0.5, math.pi / 2).advanced == (0,)
     assert pp.update(10.0, 9.0, math.pi / 2).advanced == (1,)
-    out = pp.update(2.5, 10.0, math.pi)  # 2.5 m before w2; the loop goes on w2 -> w0
-    assert out.target == 2
-    assert out.lookahead_point == pytest.approx((2.5 / math.sqrt(2), 10 - 2.5 / math.sqrt(2)))
+    assert pp.update(1.0, 10.0, math.pi).advanced == (2,)
+    out = pp.update(1.0, 10.0, math.pi)  # the loop goes on w2 -> w0
+    assert out.target == 0
+    direction = np.array([10.0, -10.0]) / math.hypot(10.0, 10.0)
+    assert out.lookahead_point == pytest.approx(tuple(np.array([0.0, 10.0])
+                                                      + (1.0 / math.sqrt(2) + 5.0)
+                                                      * direction))
 
 
 def test_patrol_with_one_waypoint_finishes(arcs):
