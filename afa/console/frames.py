@@ -1,26 +1,26 @@
-"""The console's WebSocket frames: a JSON header and, for events, the wire encoding.
+"""The console's WebSocket frames: a JSON header and the wire encoding of events.
 
 Every message from the console to the browser is one binary WebSocket message::
 
     offset  size  field
     0       4     magic b"AFC1"
     4       4     h: length of the JSON header (u32, little-endian)
-    8       4     e: offset of the event in the message, 0 if none (u32)
+    8       4     n: number of events in the message (u32)
     12      4     reserved, 0
     16      h     the header, UTF-8 JSON: {"kind": ..., "stream": ..., ...}
-    .             zero padding
-    e             the event: :meth:`afa.events.Event.encode` (an ``AFE1`` envelope and the
-                  body's ``AFW1`` wire frame, :mod:`idl.wire`)
+    16+h    8·n   the event table: (u32 offset, u32 length) of each event in the message
+    .             each event, after zero padding: :meth:`afa.events.Event.encode` (an
+                  ``AFE1`` envelope and the body's ``AFW1`` wire frame, :mod:`idl.wire`)
 
-The padding is chosen so that the ``AFW1`` frame starts at a multiple of 8 in the
-message: the wire codec aligns every array buffer to 8 bytes from the start of its frame,
-so the browser can make typed arrays (``Float32Array``, ...) that are *views* of the
-received ``ArrayBuffer``, with no copy (``static/js/wire.js`` decodes it).
+The padding before each event is chosen so that its ``AFW1`` frame starts at a multiple
+of 8 in the message: the wire codec aligns every array buffer to 8 bytes from the start
+of its frame, so the browser makes typed arrays (``Float32Array``, ...) that are *views*
+of the received ``ArrayBuffer``, with no copy (``static/js/wire.js`` decodes it). A
+stream that sends several entries at once (laser scan lines) sends them in one message.
 
-Messages without an event (the component table, the geometry model, waypoints, replay
-state, replies) are the header alone. The browser sends JSON text messages (which
-streams it wants and at what rate); control requests are HTTP POSTs (see
-:mod:`afa.console.server`).
+Messages without events (the component table, the geometry model, waypoints, replay
+state) are the header alone. The browser sends JSON text messages (which kinds it shows
+and at what rate); control requests are HTTP POSTs (see :mod:`afa.console.server`).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import struct
+from collections.abc import Sequence
 from typing import Any
 
 from afa.events import Event
@@ -37,6 +38,7 @@ __all__ = ["MAGIC", "encode_frame", "decode_frame", "event_names_length", "finit
 
 MAGIC = b"AFC1"
 _FIXED = struct.Struct("<4sIII")
+_ENTRY = struct.Struct("<II")
 #: Size of the AFE1 envelope before the three names (magic, time, seq, three lengths).
 EVENT_ENVELOPE_SIZE = 4 + 8 + 8 + 2 + 2 + 2
 
@@ -60,21 +62,24 @@ def _json(header: dict[str, Any]) -> bytes:
     return text.encode()
 
 
-def encode_frame(header: dict[str, Any], event: bytes | None = None,
-                 names_length: int = 0) -> bytes:
-    """One console message: ``header`` and, optionally, an encoded event.
-
-    ``event`` is ``Event.encode()`` of the event and ``names_length`` the total UTF-8
-    length of its domain, type and origin (so the body frame can be 8-aligned).
-    """
+def encode_frame(header: dict[str, Any],
+                 events: Sequence[tuple[bytes, int]] = ()) -> bytes:
+    """One console message: ``header`` and the encoded ``events``, each given as
+    (``Event.encode()``, total UTF-8 length of its domain, type and origin) so that its
+    body frame can be 8-aligned."""
     head = _json(header)
-    if event is None:
+    if not events:
         return _FIXED.pack(MAGIC, len(head), 0, 0) + head
-    start = _FIXED.size + len(head)
-    body_start = start + EVENT_ENVELOPE_SIZE + names_length
-    pad = -body_start % 8
-    offset = start + pad
-    return b"".join((_FIXED.pack(MAGIC, len(head), offset, 0), head, b"\x00" * pad, event))
+    offset = _FIXED.size + len(head) + 8 * len(events)
+    table, parts = [], []
+    for data, names_length in events:
+        pad = -(offset + EVENT_ENVELOPE_SIZE + names_length) % 8
+        offset += pad
+        table.append(_ENTRY.pack(offset, len(data)))
+        parts.append(b"\x00" * pad)
+        parts.append(data)
+        offset += len(data)
+    return b"".join((_FIXED.pack(MAGIC, len(head), len(events), 0), head, *table, *parts))
 
 
 def event_names_length(event: Event) -> int:
@@ -82,15 +87,17 @@ def event_names_length(event: Event) -> int:
     return len(event.domain.encode()) + len(event.type.encode()) + len(event.origin.encode())
 
 
-def decode_frame(data: bytes) -> tuple[dict[str, Any], Event | None]:
+def decode_frame(data: bytes) -> tuple[dict[str, Any], list[Event]]:
     """Inverse of :func:`encode_frame` (for tests and tools; the browser has its own).
     Raises ValueError for a message that is not a console frame."""
     if len(data) < _FIXED.size:
         raise ValueError("truncated console frame")
-    magic, length, offset, _ = _FIXED.unpack_from(data)
+    magic, length, count, _ = _FIXED.unpack_from(data)
     if magic != MAGIC:
         raise ValueError(f"not a console frame (magic {magic!r})")
     header = json.loads(data[_FIXED.size:_FIXED.size + length])
-    if offset == 0:
-        return header, None
-    return header, Event.decode(data[offset:])
+    events = []
+    for k in range(count):
+        offset, size = _ENTRY.unpack_from(data, _FIXED.size + length + 8 * k)
+        events.append(Event.decode(data[offset:offset + size]))
+    return header, events

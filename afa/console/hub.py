@@ -123,6 +123,7 @@ class Session:
         self.sent_bytes = 0
         self.failed = 0
         self._wake: asyncio.Future[None] | None = None
+        self._next_wake: float | None = None
         self._closed = False
 
     # -- from the browser ----------------------------------------------------------------
@@ -152,8 +153,13 @@ class Session:
         if outbox is None:
             outbox = self.outboxes[stream] = Outbox(stream, kind, 1.0 / rate,
                                                     POLICIES[kind].depth)
-        outbox.push(entry, self.hub.wall.monotonic())
-        self._poke()
+        now = self.hub.wall.monotonic()
+        outbox.push(entry, now)
+        if self._wake is not None:
+            # wake the sender only if this outbox may go before it would wake anyway
+            due = outbox.due(now)
+            if due is not None and (self._next_wake is None or due < self._next_wake):
+                self._poke()
 
     def _poke(self) -> None:
         wake = self._wake
@@ -178,8 +184,7 @@ class Session:
                 if due is None:
                     continue
                 if due <= now:
-                    for arrival, entry in outbox.take(now):
-                        await self._deliver(outbox, entry, now - arrival)
+                    await self._deliver(outbox, outbox.take(now), now)
                     now = clock.monotonic()
                     due = outbox.due(now)
                     if due is None:
@@ -189,6 +194,7 @@ class Session:
             if self._closed:
                 break
             self._wake = loop.create_future()
+            self._next_wake = next_due
             timer = None if next_due is None else clock.call_at(next_due, self._poke)
             try:
                 await self._wake
@@ -197,23 +203,29 @@ class Session:
                 if timer is not None:
                     timer.cancel()
 
-    async def _deliver(self, outbox: Outbox, entry: Any, waited: float) -> None:
+    async def _deliver(self, outbox: Outbox, entries: list[tuple[float, Any]],
+                       now: float) -> None:
+        """Send what ``outbox`` released: its events in one message, or each of the
+        console's own JSON entries."""
+        messages: list[bytes] = []
         try:
-            if isinstance(entry, Event):
-                data = self.hub.frame_for(outbox.kind, outbox.stream, entry, waited)
-                if data is None:
-                    return
-            else:
-                data = encode_frame({"kind": outbox.kind, "stream": outbox.stream, **entry})
+            events = [(arrival, e) for arrival, e in entries if isinstance(e, Event)]
+            if events:
+                data = self.hub.frame_for(outbox.kind, outbox.stream, events, now)
+                if data is not None:
+                    messages.append(data)
+            messages.extend(encode_frame({"kind": outbox.kind, "stream": outbox.stream, **e})
+                            for _, e in entries if not isinstance(e, Event))
         except Exception as exc:  # one bad entry must not end the browser's stream
             self.failed += 1
             if self.failed <= 3:
                 log.exception("console: cannot encode %s for the browser (skipped): %s",
                               outbox.stream, exc)
             return
-        await self._send(data)
-        self.sent_messages += 1
-        self.sent_bytes += len(data)
+        for data in messages:
+            await self._send(data)
+            self.sent_messages += 1
+            self.sent_bytes += len(data)
 
     def statistics(self) -> dict[str, Any]:
         return {"messages": self.sent_messages, "bytes": self.sent_bytes, "failed": self.failed,
@@ -239,7 +251,7 @@ class ConsoleHub:
         self.replay = replay
         self.wall = WallClock()
         self.sessions: set[Session] = set()
-        self.events_out: Counter[str] = Counter()
+        self.events_out: dict[str, int] = {}
         self.observed = 0
         self.halts: Counter[str] = Counter()
         self.last_halt: dict[str, float] = {}
@@ -319,13 +331,16 @@ class ConsoleHub:
     def _broadcast(self, kind: str, stream: str, entry: Any) -> None:
         self._latest[stream] = (kind, entry)
         for session in self.sessions:
-            session.offer(kind, stream, entry)
+            if kind in session.kinds:
+                session.offer(kind, stream, entry)
 
     # -- intake ----------------------------------------------------------------------------
     def _on_event(self, event: Event) -> None:
         self.observed += 1
-        if event.origin:
-            self.events_out[event.origin] += 1
+        origin = event.origin
+        if origin:
+            counts = self.events_out
+            counts[origin] = counts.get(origin, 0) + 1
         found = classify(event)
         if found is None:
             return
@@ -353,22 +368,23 @@ class ConsoleHub:
             self.halts[behaviour] += 1
             self.last_halt[behaviour] = event.time
 
-    def frame_for(self, kind: str, stream: str, event: Event,
-                  waited: float = 0.0) -> bytes | None:
-        """The console message for ``event`` (None to skip it: a range event whose
-        sensor frame is not known yet). The header carries the wall time it is sent at
-        and how long it waited in its outbox (for the page's latency figures)."""
+    def frame_for(self, kind: str, stream: str, events: list[tuple[float, Event]],
+                  now: float) -> bytes | None:
+        """The console message for ``events`` (arrival time, event) of one stream (None
+        to skip them: range events whose sensor frame is not known yet). The header
+        carries the wall time it is sent at and how long each event waited in its outbox
+        (for the page's latency figures)."""
         header: dict[str, Any] = {"kind": kind, "stream": stream, "wall": self.wall.now(),
-                                  "waited": round(waited, 6), "origin": event.origin}
+                                  "waited": [round(now - arrival, 6) for arrival, _ in events],
+                                  "origin": events[-1][1].origin}
         if kind in ("range.laser", "range.stereo", "ego.terrain", "ego.traverse"):
-            frame = str(event.body.frame)  # type: ignore[attr-defined]
+            frame = str(events[-1][1].body.frame)  # type: ignore[attr-defined]
             transform = self.transform(frame)
             if transform is None:
                 return None
             header["transform"] = transform
             header["reference"] = self.options.reference_frame
-        data, names = self._encoded.get(event)
-        return encode_frame(header, data, names)
+        return encode_frame(header, [self._encoded.get(event) for _, event in events])
 
     # -- geometry ----------------------------------------------------------------------------
     def served_name(self, interface: type[Any]) -> str | None:

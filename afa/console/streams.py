@@ -64,7 +64,7 @@ class StreamPolicy:
 
 #: Default policy per kind. Event kinds first, then the console's own JSON kinds.
 POLICIES: dict[str, StreamPolicy] = {
-    "pose": StreamPolicy(10.0, 50.0, 32, "Pose (PoseTransformIDL): the track keeps them all"),
+    "pose": StreamPolicy(10.0, 50.0, 2, "Pose (PoseTransformIDL); the track is drawn from them"),
     "map.terrain": StreamPolicy(1.0, 5.0, 1, "global terrain map (MapArrayEventIDL)"),
     "map.traverse": StreamPolicy(1.0, 5.0, 1, "global traversability (TravMapArrayEventIDL)"),
     "map.plan": StreamPolicy(0.5, 2.0, 1, "the Global Map (PlanMapEventIDL)"),
@@ -74,9 +74,9 @@ POLICIES: dict[str, StreamPolicy] = {
     "arcs.vote": StreamPolicy(5.0, 20.0, 1, "ArcVote per behaviour (ArcVoteIDL)"),
     "arcs.decision": StreamPolicy(5.0, 20.0, 1, "the arbiter's ArcDecision"),
     "path": StreamPolicy(2.0, 5.0, 1, "FindPath's PlannedPath"),
-    "range.laser": StreamPolicy(8.0, 30.0, 48, "laser scan lines (Range3dSeqEventIDL)"),
+    "range.laser": StreamPolicy(5.0, 30.0, 12, "laser scan lines (Range3dSeqEventIDL)"),
     "range.stereo": StreamPolicy(1.0, 4.0, 1, "stereo points (Range3dArrayEventIDL)"),
-    "vehicle": StreamPolicy(10.0, 20.0, 4, "VelocityData (VelocityDataIDL)"),
+    "vehicle": StreamPolicy(10.0, 20.0, 1, "VelocityData (VelocityDataIDL)"),
     "imu": StreamPolicy(10.0, 30.0, 1, "IMU attitude (ImuIDL)"),
     "gps": StreamPolicy(2.0, 10.0, 1, "GPS fixes (GpsIDL)"),
     "odometry": StreamPolicy(5.0, 20.0, 1, "wheel odometry (WheelDataIDL)"),
@@ -123,19 +123,26 @@ def _kind_of(body_type: type) -> str | None:
     return kind
 
 
+_STREAMS: dict[tuple[str, str], str] = {}
+
+
 def classify(event: Event) -> tuple[str, str] | None:
     """``(kind, stream)`` of an event, or None for an event no view shows.
 
     A Pose event that is not named ``Pose`` is still a pose (a second filter, a replay).
     The transforms ModelServer returns to polls are PoseTransformIDL too, but polls are
-    not events, so they never get here.
+    not events, so they never get here. Called for every event: cached lookups only.
     """
-    kind = _kind_of(type(event.body))
+    body_type = type(event.body)
+    kind = _CACHE[body_type] if body_type in _CACHE else _kind_of(body_type)
     if kind is None:
         return None
-    if kind == "arcs.vote":
-        return kind, f"{kind}/{event.body.behaviour}"  # type: ignore[attr-defined]
-    return kind, f"{kind}/{event.type}"
+    name = event.body.behaviour if kind == "arcs.vote" else event.type  # type: ignore[attr-defined]
+    key = (kind, name)
+    stream = _STREAMS.get(key)
+    if stream is None:
+        stream = _STREAMS[key] = f"{kind}/{name}"
+    return kind, stream
 
 
 def clamp_rate(kind: str, rate: Any) -> float:

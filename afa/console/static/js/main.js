@@ -162,17 +162,19 @@ class App {
 
   subscribe() {
     if (!this.ws || this.ws.readyState !== WebSocket.OPEN || !this.hello) return;
-    const kinds = { status: 1 };
+    const kinds = { status: null };
     if (!document.hidden) {
       for (const [id, view] of Object.entries(this.views)) {
         if (!this.shown(id)) continue;
         const wanted = view.wanted ? view.wanted() : view.definition.kinds;
         for (const [kind, rate] of Object.entries(wanted)) {
-          kinds[kind] = Math.max(kinds[kind] || 0, rate || this.hello.policies[kind]?.rate || 1);
+          // null: the server's default rate for the kind (afa/console/streams.py)
+          const chosen = rate || (this.hello.policies[kind] ? this.hello.policies[kind].rate : 1);
+          kinds[kind] = Math.max(kinds[kind] || 0, chosen);
         }
       }
     } else {
-      kinds.status = 0.2;
+      kinds.status = 0.2;   // a hidden tab: the header only, rarely
     }
     this.subscribed = kinds;
     this.ws.send(JSON.stringify({ op: "subscribe", kinds }));
@@ -226,10 +228,12 @@ class App {
       case "pose": {
         state.pose = event.body.HTransform; state.poseEvent = event;
         state.initialUTM = event.body.initialUTM;
-        const x = state.pose[3], y = state.pose[7];
-        const last = state.track[state.track.length - 1];
-        if (!last || Math.hypot(x - last[0], y - last[1]) > 0.05) state.track.push([x, y]);
-        if (state.track.length > 20000) state.track.splice(0, 2000);
+        for (const pose of message.events) {
+          const x = pose.body.HTransform[3], y = pose.body.HTransform[7];
+          const last = state.track[state.track.length - 1];
+          if (!last || Math.hypot(x - last[0], y - last[1]) > 0.1) state.track.push([x, y]);
+        }
+        if (state.track.length > 10000) state.track.splice(0, 1000);
         break;
       }
       case "geometry": state.geometry = header; break;
@@ -253,7 +257,8 @@ class App {
     const samples = this.stats.latency[kind] || (this.stats.latency[kind] = []);
     const fromEvent = this.state.status && this.state.status.clock === "wall"
       ? (now - message.event.time) * 1000 : null;
-    samples.push({ intake_ms: (now - message.header.wall + (message.header.waited || 0)) * 1000,
+    const waited = message.header.waited ? message.header.waited[message.header.waited.length - 1] : 0;
+    samples.push({ intake_ms: (now - message.header.wall + waited) * 1000,
                    event_ms: fromEvent, receive_ms: (now - message.received) * 1000 });
     if (samples.length > 500) samples.splice(0, samples.length - 500);
   }
@@ -296,10 +301,16 @@ class App {
   }
 
   // -- drawing ---------------------------------------------------------------------------------
+  // Each view redraws when its data changed, at most `fps` times a second (default 10):
+  // a browser on the vehicle's machine must not take the CPU the vehicle needs.
   _loop() {
-    const tick = () => {
+    const last = {};
+    const tick = (now) => {
       for (const [id, view] of Object.entries(this.views)) {
         if (!this.shown(id) || !view.dirty) continue;
+        const interval = 1000 / (view.definition.fps || 10);
+        if (last[id] !== undefined && now - last[id] < interval) continue;
+        last[id] = now;
         try { view.render(); } catch (error) {
           this.stats.errors++; this.stats.lastError = `${id}: ${error}`; console.error(error);
         }

@@ -94,8 +94,9 @@ export function decodeWire(buffer, offset, end) {
   return { type, body };
 }
 
-// An AFE1 event at `offset`. Returns {domain, type, origin, time, seq, bodyType, body}.
-export function decodeEvent(buffer, offset) {
+// An AFE1 event at `offset` ending at `end`. Returns {domain, type, origin, time, seq,
+// bodyType, body}.
+export function decodeEvent(buffer, offset, end = buffer.byteLength) {
   const view = new DataView(buffer);
   if (magic(view, offset) !== "AFE1") throw new Error("not an afa event");
   const time = view.getFloat64(offset + 4, true);
@@ -104,20 +105,25 @@ export function decodeEvent(buffer, offset) {
                    view.getUint16(offset + 24, true)];
   let p = offset + 26;
   const names = lengths.map((n) => { const s = utf8.decode(new Uint8Array(buffer, p, n)); p += n; return s; });
-  const frame = decodeWire(buffer, p, buffer.byteLength);
+  const frame = decodeWire(buffer, p, end);
   return { domain: names[0], type: names[1], origin: names[2], time, seq,
            bodyType: frame.type, body: frame.body };
 }
 
-// One console message. Returns {header, event|null}.
+// One console message. Returns {header, events, event} (event: the last, or null).
 export function decodeMessage(buffer) {
   const view = new DataView(buffer);
   if (buffer.byteLength < 16 || magic(view, 0) !== "AFC1") throw new Error("not a console message");
   const length = view.getUint32(4, true);
-  const eventOffset = view.getUint32(8, true);
+  const count = view.getUint32(8, true);
   const header = JSON.parse(utf8.decode(new Uint8Array(buffer, 16, length)));
-  const event = eventOffset ? decodeEvent(buffer, eventOffset) : null;
-  return { header, event };
+  const events = [];
+  for (let k = 0; k < count; k++) {
+    const offset = view.getUint32(16 + length + 8 * k, true);
+    const size = view.getUint32(16 + length + 8 * k + 4, true);
+    events.push(decodeEvent(buffer, offset, offset + size));
+  }
+  return { header, events, event: events.length ? events[events.length - 1] : null };
 }
 
 // Element [i][j] of a row-major (rows, cols) typed array.

@@ -16,7 +16,8 @@ export default {
   short: "Launcher",
   seed: "Launcher · qtHealthSafety",
   wide: true,
-  kinds: { status: 1 },
+  kinds: { status: null },
+  fps: 2,
   create(app, body, info) {
     body.style.flexDirection = "column";
     const scroll = el("div", { class: "scroll" });

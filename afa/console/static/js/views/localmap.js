@@ -58,7 +58,8 @@ export default {
   title: "Local map",
   short: "Local map",
   seed: "LocalMap · arcs",
-  kinds: { "ego.traverse": 4, "ego.terrain": 4, "arcs.vote": 5, "arcs.decision": 5 },
+  kinds: { "ego.traverse": null, "ego.terrain": null, "arcs.vote": null, "arcs.decision": null },
+  fps: 10,
   create(app, body, info) {
     body.style.flexDirection = "row";
     const main = el("div", { style: "flex:1;display:flex;flex-direction:column;min-width:0" });
@@ -88,7 +89,7 @@ export default {
     const view = {
       dirty: true, layer: "traverse", behaviour: "", map: null, image: null, pending: [], geometry: null,
       wanted() {
-        return { [LAYERS[this.layer]]: 4, "arcs.vote": 5, "arcs.decision": 5 };
+        return { [LAYERS[this.layer]]: null, "arcs.vote": null, "arcs.decision": null };
       },
       onMessage(message) {
         const kind = message.header.kind;

@@ -58,8 +58,9 @@ export default {
   title: "Maps",
   short: "Maps",
   seed: "QtMap · Global Map",
-  kinds: { pose: 10, "map.traverse": 1, "map.terrain": 1, "map.plan": 0.5, path: 2,
-           waypoints: 0.5, truth: 5 },
+  kinds: { pose: null, "map.traverse": null, "map.terrain": null, "map.plan": null, path: null,
+           waypoints: null, truth: null },
+  fps: 10,
   create(app, body, info) {
     body.style.flexDirection = "row";
     const main = el("div", { style: "flex:1;display:flex;flex-direction:column;min-width:0" });
@@ -95,9 +96,7 @@ export default {
     const view = {
       dirty: true, fit: true, mpp: 0.1, layer: "traverse", maps: {}, images: {}, pending: [],
       wanted() {
-        const kinds = { pose: 10, path: 2, waypoints: 0.5, truth: 5 };
-        kinds[LAYERS[this.layer].kind] = { "map.plan": 0.5 }[LAYERS[this.layer].kind] || 1;
-        return kinds;
+        return { pose: null, path: null, waypoints: null, truth: null, [LAYERS[this.layer].kind]: null };
       },
       onMessage(message) {
         const kind = message.header.kind;

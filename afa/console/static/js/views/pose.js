@@ -9,7 +9,8 @@ export default {
   title: "Pose",
   short: "Pose",
   seed: "qtEventPose",
-  kinds: { pose: 10, truth: 5, vehicle: 5, gps: 2 },
+  kinds: { pose: null, truth: null, vehicle: null, gps: null },
+  fps: 5,
   create(app, body, info) {
     body.style.flexDirection = "column";
     const top = el("div", { class: "grid2" });

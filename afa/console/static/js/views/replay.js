@@ -10,7 +10,8 @@ export default {
   short: "Replay",
   seed: "LogPlayer",
   wide: true,
-  kinds: { replay: 4 },
+  kinds: { replay: null },
+  fps: 5,
   create(app, body, info) {
     body.style.flexDirection = "column";
     const post = (action, value) => app.post(`/api/replay/${action}`, value === undefined ? {} : { value });

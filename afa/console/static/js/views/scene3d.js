@@ -8,8 +8,8 @@
 
 import { Surface, apply, deg, el, fmt, ramp, rpyOf } from "../util.js";
 
-const LASER_LINES = 120;    // scan lines kept per laser (about 3 s at 37.6 lines/s)
-const STEREO_POINTS = 60000;
+const LASER_LINES = 80;     // scan lines kept per laser (about 2 s at 37.6 lines/s)
+const STEREO_POINTS = 25000;  // a stereo frame is thinned to this many points
 
 // -- camera math shared by both renderers ------------------------------------------------------
 class Orbit {
@@ -53,34 +53,36 @@ function pointColour(z, stereo) {
 }
 
 // -- the point store ---------------------------------------------------------------------------
+// Positions and colours are computed once per scan line or frame; a redraw only copies them.
+function colourise(points, stereo) {
+  const colours = new Float32Array(points.length);
+  for (let k = 0; k < points.length; k += 3) {
+    const c = pointColour(points[k + 2], stereo);
+    colours[k] = c[0] / 255; colours[k + 1] = c[1] / 255; colours[k + 2] = c[2] / 255;
+  }
+  return colours;
+}
+
 class Cloud {
-  constructor() { this.lines = new Map(); this.stereo = null; this.version = 0; this.counts = {}; }
-  addLaser(stream, points) {
+  constructor() { this.lines = new Map(); this.stereo = null; this.version = 0; }
+  addLaser(stream, positions) {
     let ring = this.lines.get(stream);
     if (!ring) { ring = []; this.lines.set(stream, ring); }
-    ring.push(points);
+    ring.push({ positions, colours: colourise(positions, false) });
     if (ring.length > LASER_LINES) ring.shift();
     this.version++;
   }
-  setStereo(points) { this.stereo = points; this.version++; }
+  setStereo(positions) { this.stereo = { positions, colours: colourise(positions, true) }; this.version++; }
   // every point as flat arrays of positions and colours
   flatten(showLaser, showStereo) {
-    let n = 0;
-    if (showLaser) for (const ring of this.lines.values()) for (const line of ring) n += line.length / 3;
-    if (showStereo && this.stereo) n += this.stereo.length / 3;
-    const positions = new Float32Array(n * 3), colours = new Float32Array(n * 3);
+    const parts = [];
+    if (showLaser) for (const ring of this.lines.values()) parts.push(...ring);
+    if (showStereo && this.stereo) parts.push(this.stereo);
+    const n = parts.reduce((sum, part) => sum + part.positions.length, 0);
+    const positions = new Float32Array(n), colours = new Float32Array(n);
     let p = 0;
-    const put = (pts, stereo) => {
-      for (let k = 0; k < pts.length; k += 3) {
-        const c = pointColour(pts[k + 2], stereo);
-        positions[p] = pts[k]; positions[p + 1] = pts[k + 1]; positions[p + 2] = pts[k + 2];
-        colours[p] = c[0] / 255; colours[p + 1] = c[1] / 255; colours[p + 2] = c[2] / 255;
-        p += 3;
-      }
-    };
-    if (showLaser) for (const ring of this.lines.values()) for (const line of ring) put(line, false);
-    if (showStereo && this.stereo) put(this.stereo, true);
-    return { positions, colours, count: n };
+    for (const part of parts) { positions.set(part.positions, p); colours.set(part.colours, p); p += part.positions.length; }
+    return { positions, colours, count: n / 3 };
   }
 }
 
@@ -122,13 +124,24 @@ class FlatRenderer {
       if (k <= 10) line(ctx, project, [-10, k, z], [20, k, z]);
     }
     if (view.show.points) {
+      // points straight into the pixels (2 x 2 device pixels each): fillRect per point is slow
       const { positions, colours, count } = view.points();
+      const ratio = this.canvas.width / w;
+      const W = this.canvas.width, H = this.canvas.height;
+      const image = ctx.getImageData(0, 0, W, H);
+      const data = image.data;
       for (let k = 0; k < count; k++) {
         const s = project(positions[3 * k], positions[3 * k + 1], positions[3 * k + 2]);
         if (!s) continue;
-        ctx.fillStyle = `rgb(${(colours[3 * k] * 255) | 0},${(colours[3 * k + 1] * 255) | 0},${(colours[3 * k + 2] * 255) | 0})`;
-        ctx.fillRect(s[0] - 1, s[1] - 1, 2, 2);
+        const x0 = Math.round(s[0] * ratio), y0 = Math.round(s[1] * ratio);
+        if (x0 < 0 || y0 < 0 || x0 >= W - 1 || y0 >= H - 1) continue;
+        const r = colours[3 * k] * 255, g = colours[3 * k + 1] * 255, b = colours[3 * k + 2] * 255;
+        for (const [dx, dy] of [[0, 0], [1, 0], [0, 1], [1, 1]]) {
+          const q = ((y0 + dy) * W + x0 + dx) * 4;
+          data[q] = r; data[q + 1] = g; data[q + 2] = b; data[q + 3] = 255;
+        }
       }
+      ctx.putImageData(image, 0, 0);
     }
     if (view.show.frames) {
       for (const frame of view.frames) {
@@ -247,7 +260,8 @@ export default {
   title: "Body frames & range points",
   short: "3-D",
   seed: "QtBodyViewer · QtRange3dSensor · qtEventStereo",
-  kinds: { geometry: 1, "range.laser": 8, "range.stereo": 1 },
+  kinds: { geometry: null, "range.laser": null, "range.stereo": null },
+  fps: 10,
   create(app, body, info) {
     body.style.flexDirection = "row";
     const main = el("div", { style: "flex:1;display:flex;flex-direction:column;min-width:0" });
@@ -294,7 +308,7 @@ export default {
             return item;
           }));
         } else if (header.kind === "range.laser") {
-          cloud.addLaser(header.stream, transformed(event.body, header.transform));
+          for (const line of message.events) cloud.addLaser(header.stream, transformed(line.body, header.transform));
           this.pending.push(message);
         } else if (header.kind === "range.stereo") {
           cloud.setStereo(transformed(event.body, header.transform, STEREO_POINTS));
@@ -325,8 +339,8 @@ export default {
         if (!this.renderer) return;
         this.renderer.render();
         const facts = [];
-        for (const [stream, ring] of cloud.lines) facts.push([stream.split("/")[1], `${ring.reduce((n, l) => n + l.length / 3, 0)} pts, ${ring.length} lines`]);
-        if (cloud.stereo) facts.push(["Stereo", `${cloud.stereo.length / 3} pts`]);
+        for (const [stream, ring] of cloud.lines) facts.push([stream.split("/")[1], `${ring.reduce((n, l) => n + l.positions.length / 3, 0)} pts, ${ring.length} lines`]);
+        if (cloud.stereo) facts.push(["Stereo", `${cloud.stereo.positions.length / 3} pts`]);
         if (!facts.length) facts.push(["range events", "none yet"]);
         counts.replaceChildren(...facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
         const frame = this.frames.find((f) => f.name === this.selected);

@@ -9,7 +9,8 @@ export default {
   title: "Vehicle & health",
   short: "Vehicle",
   seed: "qtRaptor · qtHealthSafety · qtEventImu",
-  kinds: { vehicle: 10, imu: 10, status: 1, "arcs.decision": 5 },
+  kinds: { vehicle: null, imu: null, status: null, "arcs.decision": null },
+  fps: 5,
   create(app, body, info) {
     body.style.flexDirection = "column";
     const buttons = el("div", { class: "tools" });
