@@ -244,12 +244,14 @@ class ConsoleHub:
 
     def __init__(self, system: Any, options: HubOptions | None = None, *,
                  truth: GroundTruth | None = None,
-                 replay: ReplayControl | None = None) -> None:
+                 replay: ReplayControl | None = None, wall: Clock | None = None) -> None:
         self.system = system
         self.options = options or HubOptions()
         self.truth = truth
         self.replay = replay
-        self.wall = WallClock()
+        #: the console's pace (rates, periods): real time whatever the system's clock;
+        #: tests give a virtual one
+        self.wall: Clock = wall or WallClock()
         self.sessions: set[Session] = set()
         self.events_out: dict[str, int] = {}
         self.observed = 0

@@ -25,7 +25,7 @@ import logging
 from importlib import resources
 from typing import Any
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from afa.console.frames import encode_frame, finite
 from afa.console.guard import TOKEN_HEADER, ControlGuard, Permission
@@ -88,12 +88,15 @@ class ConsoleServer:
             web.post("/api/replay/{action}", self._replay),
         ])
         self._runner: web.AppRunner | None = None
+        self._sockets: set[web.WebSocketResponse] = set()
         self.port = guard.port
 
     async def start(self) -> None:
         """Listen on the guard's host and port (port 0: a free one, then known).
         Raises OSError when the address cannot be used."""
-        runner = web.AppRunner(self.app, access_log=None, handle_signals=False)
+        # the browsers' WebSockets are closed first at stop(); nothing else lingers
+        runner = web.AppRunner(self.app, access_log=None, handle_signals=False,
+                               shutdown_timeout=2.0)
         await runner.setup()
         site = web.TCPSite(runner, self.guard.host, self.guard.port, reuse_address=True)
         try:
@@ -108,6 +111,10 @@ class ConsoleServer:
             self.guard.port = self.port
 
     async def stop(self) -> None:
+        """Close every browser's WebSocket (the page shows 'disconnected' and retries),
+        then the server."""
+        for ws in list(self._sockets):
+            await ws.close(code=WSCloseCode.GOING_AWAY, message=b"the console is stopping")
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
@@ -159,6 +166,7 @@ class ConsoleServer:
 
         session = self.hub.open_session(send, name=str(request.remote))
         sender = self.hub.spawn(session.run(), owner="console sender")
+        self._sockets.add(ws)
         try:
             await ws.send_bytes(encode_frame(self._hello()))
             async for message in ws:
@@ -167,6 +175,7 @@ class ConsoleServer:
                 elif message.type is WSMsgType.ERROR:
                     break
         finally:
+            self._sockets.discard(ws)
             self.hub.close_session(session)
             sender.cancel()
         return ws

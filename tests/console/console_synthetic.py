@@ -28,9 +28,14 @@ from idl import (
     PlanningBoundaryIDL,
     PoseTransformIDL,
     Position3DIDL,
+    Range3dSeqEventIDL,
     TimeIDL,
     TravMapArrayEventIDL,
+    VelocityDataIDL,
+    VelocityIDL,
 )
+from idl import VehicleControl as VehicleControlInterface
+from idl.vehicle import MinMaxVelocityIDL
 
 ROOT = Path(__file__).resolve().parents[2]
 RAPTOR = ROOT / "configs" / "raptor.xml"
@@ -120,6 +125,7 @@ class SyntheticStack(SubscribePublishServer):
         self.votes = self.publishes("ArcVote", ArcVoteIDL)
         self.decision = self.publishes("ArcDecision", ArcDecisionIDL)
         self.path = self.publishes("PlannedPath", PlannedPathIDL)
+        self.laser = self.publishes("Laser11", Range3dSeqEventIDL)
         self.rear_x = -bumper_offset()
         self.published = 0
 
@@ -159,6 +165,18 @@ class SyntheticStack(SubscribePublishServer):
         ]
 
     @staticmethod
+    def _scan_line(stamp: TimeIDL, tick: int) -> Range3dSeqEventIDL:
+        """A laser scan line on the ground ahead, in the laser's frame (a fan in the
+        frame's x-y plane, nodding back and forth with the ticks)."""
+        bearings = np.deg2rad(np.arange(0.0, 180.5, 1.0))
+        reach = 6.0 + 3.0 * math.sin(tick * 0.3)
+        points = np.stack([reach * np.sin(bearings), -reach * np.cos(bearings),
+                           np.full(bearings.shape, -2.0)], axis=1).astype(np.float32)
+        return Range3dSeqEventIDL(time=stamp, sensorId=11,
+                                  frame="FrontNoddingSICKLeft:AxleCenterFreeEnd",
+                                  points=points)
+
+    @staticmethod
     def decide(stamp: TimeIDL, votes: list[ArcVoteIDL]) -> ArcDecisionIDL:
         scores = sum(v.vote.astype(float) * v.certainty.astype(float) for v in votes)
         vetoed = np.logical_or.reduce([v.veto for v in votes])
@@ -195,6 +213,7 @@ class SyntheticStack(SubscribePublishServer):
             for vote in votes:
                 self.votes.publish(vote)
             self.decision.publish(self.decide(stamp, votes))
+            self.laser.publish(self._scan_line(stamp, tick))
             if tick % 2 == 0:
                 g = self._global(stamp, vx, vy)
                 trav = dict(hazard=hazard, goodness=goodness,
@@ -226,9 +245,58 @@ class SyntheticStack(SubscribePublishServer):
             self.published += 1
 
 
+class FakeVehicleControl(SubscribePublishServer):
+    """Serves VehicleControl as ``RaptorMotion`` and records the calls (no vehicle);
+    publishes VelocityData every period."""
+
+    def __init__(self, name: str = "RaptorService", period: float = 0.2) -> None:
+        super().__init__(name)
+        self.period = period
+        self.calls: list[str] = []
+        self.started = False
+        self.arbiter = False
+        self.motion = self.publishes("RaptorMotion", VelocityDataIDL)
+        self.serves(VehicleControlInterface, "RaptorMotion")
+
+    async def run(self) -> None:
+        async for _ in self.clock.periodic(self.period):
+            speed = SPEED if self.started else 0.0
+            self.motion.publish(VelocityDataIDL(
+                time=TimeIDL.from_seconds(self.clock.now()),
+                velocity=VelocityIDL(translation=speed, steeringAngle=0.1),
+                target=VelocityIDL(translation=speed, steeringAngle=0.12),
+                vehicleStarted=self.started, arbiterEnabled=self.arbiter))
+
+    async def setVelocity(self, velocity: VelocityIDL) -> None:
+        self.calls.append("setVelocity")
+
+    async def getTargetVelocity(self) -> VelocityIDL:
+        return VelocityIDL()
+
+    async def startVehicle(self) -> None:
+        self.calls.append("startVehicle")
+        self.started = True
+
+    async def stopVehicle(self) -> None:
+        self.calls.append("stopVehicle")
+        self.started = False
+
+    async def setJoystickVelocity(self, velocity: VelocityIDL) -> None:
+        self.calls.append("setJoystickVelocity")
+
+    async def setArbiter(self, enabled: bool) -> None:
+        self.calls.append(f"setArbiter({enabled})")
+        self.arbiter = enabled
+
+    async def getMinMaxVelocity(self) -> MinMaxVelocityIDL:
+        return MinMaxVelocityIDL(minTranslation=-1.0, maxTranslation=2.0, minRotation=-1.0,
+                                 maxRotation=1.0, maxSteeringAngle=0.5)
+
+
 def synthetic_system(clock: object, period: float = 0.1) -> System:
-    """ModelServer (the geometry, from the Raptor's configuration) and the synthetic
-    stack."""
+    """ModelServer (the geometry, from the Raptor's configuration), the synthetic stack
+    and a fake Vehicle Control."""
     system = System.from_xml(RAPTOR, only=["modelServer"], clock=clock)
     system.add(SyntheticStack(period=period))
+    system.add(FakeVehicleControl())
     return system

@@ -28,7 +28,7 @@ class App {
                    connected: false, connections: 0 };
     this.ready = false;
     this.token = this._token();
-    this.layout = this._loadLayout();
+    this.layout = this._urlLayout(this._loadLayout());
     this.ws = null;
     this._frame = null;
   }
@@ -88,9 +88,19 @@ class App {
         return { ...fallback, ...saved, order };
       }
     } catch (error) { /* a broken saved layout: start afresh */ }
-    const params = new URLSearchParams(location.search);
-    if (params.get("layout") === "tabs") fallback.mode = "tabs";
     return fallback;
+  }
+
+  // ?views=maps,localmap shows only those panes; ?layout=tabs one at a time (a bookmark
+  // for a particular screen; overrides the saved layout)
+  _urlLayout(layout) {
+    const params = new URLSearchParams(location.search);
+    if (params.get("layout") === "tabs" || params.get("layout") === "grid") layout.mode = params.get("layout");
+    if (params.get("views")) {
+      const wanted = new Set(params.get("views").split(","));
+      for (const v of VIEWS) layout.visible[v.id] = wanted.has(v.id);
+    }
+    return layout;
   }
 
   _applyLayout() {
