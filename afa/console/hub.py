@@ -25,7 +25,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from afa.clock import VirtualClock, WallClock
+from afa.clock import Clock, VirtualClock, WallClock
 from afa.console.frames import encode_frame, event_names_length
 from afa.console.launcher import (
     CONSOLE_TASK,
