@@ -142,6 +142,9 @@ def _log_parsers(commands: Any) -> None:
                              "recorded one; stop at the first divergence (exit 3)")
     replay.add_argument("--atol", type=float, default=0.0,
                         help="with --check: absolute tolerance for numbers (default 0: exact)")
+    from afa.console import add_arguments as add_console_arguments
+
+    add_console_arguments(replay)
     replay.set_defaults(handler=_log_handler("replay"))
 
     log_parser = commands.add_parser("log", help="inspect and repair recordings")

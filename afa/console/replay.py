@@ -27,15 +27,15 @@ class ReplayControl(Protocol):
 
     ``status()`` returns a mapping with at least ``position`` (seconds from the start of
     the recording), ``duration`` (seconds, or None if unknown), ``speed`` (the pace as a
-    multiple of real time) and ``paused`` (bool); optionally ``label`` (the file) and
-    ``time`` (the recording's time stamp at the position, epoch seconds).
+    multiple of real time; None: as fast as possible) and ``paused`` (bool); optionally
+    ``label`` (the file). ``set_speed(None)`` means as fast as possible (``speed max``).
     """
 
     def play(self) -> Any: ...
     def pause(self) -> Any: ...
     def step(self) -> Any: ...
     def seek(self, position: float) -> Any: ...
-    def set_speed(self, speed: float) -> Any: ...
+    def set_speed(self, speed: float | None) -> Any: ...
     def status(self) -> Mapping[str, Any]: ...
 
 
@@ -64,7 +64,7 @@ class ReplayAdapter:
     def seek(self, position: float) -> Any:
         return self._call("seek", args=(position,))
 
-    def set_speed(self, speed: float) -> Any:
+    def set_speed(self, speed: float | None) -> Any:
         method = getattr(self.player, "set_speed", None)
         if callable(method):
             return method(speed)
@@ -78,13 +78,19 @@ class ReplayAdapter:
             if isinstance(value, Mapping):
                 return value
         player = self.player
-        position = _first(player, "position", "offset", "elapsed")
-        return {"position": position, "duration": _first(player, "duration", "length"),
-                "speed": _first(player, "speed"), "paused": bool(_first(player, "paused")),
-                "label": str(_first(player, "path", "file", "label") or "")}
+        reader = getattr(player, "reader", None)  # afa.log's Player: its LogReader
+        position = _first(player, "elapsed", "position", "offset")
+        duration = _first(player, "duration", "length")
+        if duration is None and reader is not None:
+            duration = _first(reader, "duration")
+        label = _first(player, "path", "file", "label") or _first(reader, "path") or ""
+        return {"position": position, "duration": duration, "speed": _first(player, "speed"),
+                "paused": bool(_first(player, "paused")), "label": str(label)}
 
 
 def _first(obj: Any, *names: str) -> Any:
+    if obj is None:
+        return None
     for name in names:
         value = getattr(obj, name, None)
         if value is not None and not callable(value):
@@ -103,7 +109,9 @@ async def perform(control: ReplayControl, action: str, value: Any = None) -> Non
     """Run one replay action. Raises ValueError for an unknown action or a bad value."""
     if action not in ACTIONS:
         raise ValueError(f"unknown replay action {action!r}; known: {', '.join(ACTIONS)}")
-    if action in ("seek", "speed"):
+    if action == "speed" and value == "max":
+        result = control.set_speed(None)   # as fast as possible
+    elif action in ("seek", "speed"):
         try:
             number = float(value)
         except (TypeError, ValueError):

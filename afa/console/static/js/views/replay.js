@@ -28,8 +28,9 @@ export default {
     });
     const speed = el("select", { "data-action": "replay-speed" });
     for (const s of [0.1, 0.25, 0.5, 1, 2, 4, 8, 16]) speed.append(el("option", { value: String(s), text: `×${s}` }));
+    speed.append(el("option", { value: "max", text: "as fast as possible" }));
     speed.value = "1";
-    speed.addEventListener("change", () => post("speed", Number(speed.value)));
+    speed.addEventListener("change", () => post("speed", speed.value === "max" ? "max" : Number(speed.value)));
     const where = el("span", { class: "big", text: "—" });
     const state = el("span", { class: "muted" });
     body.append(el("div", { class: "replay-controls" }, play, pause, step, slider, el("label", {}, "speed ", speed), where, state));
@@ -41,10 +42,12 @@ export default {
         const s = this.status;
         if (s) {
           where.textContent = `${fmt(s.position, 1)} / ${fmt(s.duration, 1)} s`;
-          state.textContent = `${s.paused ? "paused" : "playing"} at ×${fmt(s.speed, 2)}${s.label ? " · " + s.label : ""}`;
+          const pace = s.speed === null ? "as fast as possible" : `×${fmt(s.speed, 2)}`;
+          state.textContent = `${s.paused ? "paused" : "playing"} at ${pace}${s.label ? " · " + s.label : ""}`;
           if (!seeking && s.duration) slider.value = String(Math.round((s.position / s.duration) * 1000));
-          if (document.activeElement !== speed && s.speed) {
-            const option = Array.from(speed.options).find((o) => Math.abs(Number(o.value) - s.speed) < 1e-9);
+          if (document.activeElement !== speed) {
+            const option = Array.from(speed.options).find((o) => (s.speed === null ? o.value === "max"
+              : Math.abs(Number(o.value) - s.speed) < 1e-9));
             if (option) speed.value = option.value;
           }
           info.textContent = s.label || "";
