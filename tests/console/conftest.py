@@ -128,7 +128,7 @@ def open_console(browser: Any, artifacts: Path) -> Any:
         page.on("websocket", lambda ws: console_page.requests.append(ws.url) or (
             console_page.foreign.append(ws.url)
             if urlsplit(ws.url).hostname != "127.0.0.1" else None))
-        await page.goto(url)
+        await page.goto(url, timeout=60_000)
         await console_page.wait("window.afaConsole && window.afaConsole.ready",
                                 what="the first status message")
         return console_page

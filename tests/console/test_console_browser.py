@@ -15,8 +15,9 @@ from pathlib import Path
 import pytest
 from console_synthetic import EGO_OBSTACLE, GLOBAL_FREE, GLOBAL_OBSTACLES, synthetic_system
 
-from afa import WallClock
+from afa import VirtualClock, WallClock
 from afa.console import Console, ConsoleOptions
+from components.gps_sokkia.codec import latlon_to_utm
 from components.simulation import RaptorSimulation
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -118,9 +119,10 @@ async def test_maps_and_the_local_map_draw_obstacles_and_arcs_where_the_events_s
 
 async def test_a_simulated_run_in_every_view_and_a_restart_from_the_page(open_console,
                                                                          artifacts):
+    # paced virtual time: on a loaded machine the run slows down instead of timing out
     simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml",
                                            ROOT / "configs" / "worlds" / "rock-field.xml",
-                                           clock=WallClock(), seed=0)
+                                           clock=VirtualClock(pace=1.0), seed=0)
     system = simulation.system
     console = Console(system, ConsoleOptions(port=0, control=True), truth=simulation)
     async with console, simulation:
@@ -150,6 +152,14 @@ async def test_a_simulated_run_in_every_view_and_a_restart_from_the_page(open_co
         # the local map shows the arbiter's real decisions (no maps yet on this stack)
         await page.wait("afaConsole.state.decision", what="an ArcDecision")
         assert await page.js("afaConsole.probe('localmap', [255, 225, 77, 25]).matches") > 20
+        # the planners' waypoint lists (lat/lon) converted to UTM in the page, as afa does
+        await page.wait("afaConsole.state.waypoints", what="waypoint lists")
+        for lat, lon in ((50.2717, -111.1766), (50.3, -110.9), (-33.9, 151.2), (64.1, -21.9)):
+            easting, northing, zone = await page.js(f"afaConsole.utm({lat}, {lon})")
+            expected = latlon_to_utm(lat, lon)
+            assert zone == expected.zone_number
+            assert abs(easting - expected.easting_m) < 0.01
+            assert abs(northing - expected.northing_m) < 0.01
         for name in ("launcher", "pose", "scene", "vehicle", "localmap", "maps"):
             await page.shot(f"sim-{name}", f"#pane-{name}")
         # restart a component from the page

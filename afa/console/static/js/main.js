@@ -3,7 +3,7 @@
 // server for exactly the kinds of the views on screen (none while the tab is hidden).
 
 import { decodeMessage } from "./wire.js";
-import { el } from "./util.js";
+import { el, utm } from "./util.js";
 import launcher from "./views/launcher.js";
 import maps from "./views/maps.js";
 import localmap from "./views/localmap.js";
@@ -369,5 +369,6 @@ class App {
 }
 
 const app = new App();
+app.utm = utm;   // for tests and the browser's developer console
 window.afaConsole = app;
 app.start();

@@ -174,3 +174,30 @@ export class Strip {
     }
   }
 }
+
+// --- geodesy -------------------------------------------------------------------------------
+// WGS84 latitude/longitude (deg) to UTM [easting, northing, zone] in the zone of the
+// longitude (Norway and Svalbard exceptions ignored): the transverse Mercator series in n
+// to the fourth order (Krüger), millimetres within a zone. For waypoints that carry no UTM.
+const WGS84_A = 6378137.0, WGS84_F = 1 / 298.257223563, K0 = 0.9996;
+export function utm(latitude, longitude, zone = null) {
+  const n = WGS84_F / (2 - WGS84_F), n2 = n * n, n3 = n2 * n, n4 = n3 * n;
+  const A = (WGS84_A / (1 + n)) * (1 + n2 / 4 + n4 / 64);
+  const alpha = [n / 2 - (2 * n2) / 3 + (5 * n3) / 16 + (41 * n4) / 180,
+                 (13 * n2) / 48 - (3 * n3) / 5 + (557 * n4) / 1440,
+                 (61 * n3) / 240 - (103 * n4) / 140,
+                 (49561 * n4) / 161280];
+  const z = zone || Math.floor((longitude + 180) / 6) + 1;
+  const phi = (latitude * Math.PI) / 180;
+  const dl = ((longitude - (z * 6 - 183)) * Math.PI) / 180;
+  const c = (2 * Math.sqrt(n)) / (1 + n);
+  const t = Math.sinh(Math.atanh(Math.sin(phi)) - c * Math.atanh(c * Math.sin(phi)));
+  const xi = Math.atan2(t, Math.cos(dl));
+  const eta = Math.atanh(Math.sin(dl) / Math.sqrt(1 + t * t));
+  let x = eta, y = xi;
+  for (let j = 1; j <= 4; j++) {
+    x += alpha[j - 1] * Math.cos(2 * j * xi) * Math.sinh(2 * j * eta);
+    y += alpha[j - 1] * Math.sin(2 * j * xi) * Math.cosh(2 * j * eta);
+  }
+  return [500000 + K0 * A * x, (latitude < 0 ? 10000000 : 0) + K0 * A * y, z];
+}

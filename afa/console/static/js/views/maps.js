@@ -6,7 +6,7 @@
 // [originY + j g, ...); rows run east, columns north for global maps; mapPose places the
 // map frame in the world frame (origin at initialUTM).
 
-import { OBSTACLE, Surface, el, fmt, hazardColour, ramp, rgb, yawOf } from "../util.js";
+import { OBSTACLE, Surface, el, fmt, hazardColour, ramp, rgb, utm, yawOf } from "../util.js";
 
 const LAYERS = {
   traverse: { kind: "map.traverse", label: "traversability" },
@@ -218,8 +218,9 @@ export default {
         }
         for (const [name, list] of Object.entries(state.waypoints || {})) {
           list.waypoints.forEach((wp, k) => {
-            if (wp.easting === null || wp.northing === null) return;
-            const world = toWorld([wp.easting, wp.northing]); if (!world) return;
+            const grid = wp.easting === null || wp.northing === null
+              ? utm(wp.latitude, wp.longitude) : [wp.easting, wp.northing];
+            const world = toWorld(grid); if (!world) return;
             const [sx, sy] = view.screenOf(world[0], world[1]);
             ctx.fillStyle = "#58a6ff";
             ctx.beginPath(); ctx.moveTo(sx, sy - 6); ctx.lineTo(sx + 6, sy); ctx.lineTo(sx, sy + 6); ctx.lineTo(sx - 6, sy); ctx.fill();
