@@ -74,13 +74,12 @@ class GroundTruth(Protocol):
 class HubOptions:
     """``reference_frame``: the frame the 3-D view and range points are drawn in (the
     Raptor frame, the pose's reference). ``status_period``: seconds between component
-    tables. ``memory_period``: seconds between memory estimates. ``stale_vote_time``:
+    tables (each also refreshes one component's memory estimate). ``stale_vote_time``:
     seconds after which a behaviour's vote counts as stale on the health view (default:
     the configured arbiter's StaleVoteTime, else 1.5)."""
 
     reference_frame: str = "Raptor:RearAxleCenter"
     status_period: float = 1.0
-    memory_period: float = 5.0
     stale_vote_time: float | None = None
     observer_buffer: int = 8192
     rates: dict[str, float] = field(default_factory=dict)
@@ -505,26 +504,24 @@ class ConsoleHub:
 
     # -- status ------------------------------------------------------------------------------
     async def _produce_status(self) -> None:
-        memory_due = 0.0
+        turn = 0
         while True:
-            now = self.wall.monotonic()
             if self._shares is not None:
                 self._shares.update()
-            if now >= memory_due and self._wanted("status"):
-                self._memory = self._measure_memory()
-                memory_due = now + self.options.memory_period
             if self._wanted("status"):
+                # one component's memory per table: the walk's cost is spread out
+                names = list(self.system.components)
+                if names:
+                    self._measure_memory(names[turn % len(names)])
+                    turn += 1
                 self._broadcast("status", "status/system", self.status())
             await self.wall.sleep(self.options.status_period)
 
-    def _measure_memory(self) -> dict[str, int]:
-        memory = {}
-        for name, component in list(self.system.components.items()):
-            try:
-                memory[name] = retained_bytes(component)
-            except Exception as exc:  # an exotic attribute must not break the table
-                log.debug("console: memory of %s: %s", name, exc)
-        return memory
+    def _measure_memory(self, name: str) -> None:
+        try:
+            self._memory[name] = retained_bytes(self.system.components[name])
+        except Exception as exc:  # an exotic attribute must not break the table
+            log.debug("console: memory of %s: %s", name, exc)
 
     def _rate_window(self) -> dict[str, float]:
         return {"clock": self.system.clock.monotonic(), "wall": self.wall.monotonic()}

@@ -285,3 +285,20 @@ def test_the_memory_estimate_counts_what_a_component_holds_once():
     System([holder])
     size = retained_bytes(holder)
     assert 1_048_576 + 80_000 <= size < 1_048_576 + 80_000 + 50_000
+
+
+class Planner(Component):
+    def __init__(self):
+        super().__init__("planner")
+        self.table = {(i, i + 1): (float(i), i) for i in range(20_000)}  # many small objects
+
+
+def test_a_large_table_is_estimated_from_a_sample_quickly():
+    import sys
+
+    planner = Planner()
+    exact = sys.getsizeof(planner.table) + sum(
+        sys.getsizeof(k) + sum(sys.getsizeof(x) for x in k)
+        + sys.getsizeof(v) + sum(sys.getsizeof(x) for x in v) for k, v in planner.table.items())
+    estimate = retained_bytes(planner)
+    assert 0.7 * exact < estimate < 1.3 * exact

@@ -275,10 +275,11 @@ class App {
 
   _statusBar(status) {
     const running = status.running ? "running" : "stopped";
-    const rtf = status.realtime_factor === null ? "—" : `×${status.realtime_factor.toFixed(2)}`;
+    const rtf = status.realtime_factor === null || status.paused ? "" : `×${status.realtime_factor.toFixed(2)}`;
     const busy = `${(status.loop.busy * 100).toFixed(1)} %`;
     const rss = status.rss ? `${(status.rss / 1048576).toFixed(0)} MiB` : "—";
-    const clock = status.clock === "virtual" ? "virtual time" : "wall time";
+    const clock = status.clock === "virtual" ? (status.paused ? "virtual time, paused" : "virtual time")
+                                             : "wall time";
     document.getElementById("clock").textContent =
       `${new Date(status.now * 1000).toISOString().replace("T", " ").slice(0, 19)} UTC · ${clock} ${rtf}`;
     const observer = status.console.observer;

@@ -216,15 +216,19 @@ export default {
             ctx.fillStyle = "#ff9f1c"; ctx.font = "11px system-ui, sans-serif"; ctx.fillText(String(k + 1), sx + 9, sy - 6);
           });
         }
-        for (const [name, list] of Object.entries(state.waypoints || {})) {
+        const drawn = [];   // the same waypoint in several planners' lists is drawn once
+        for (const list of Object.values(state.waypoints || {})) {
           list.waypoints.forEach((wp, k) => {
             const grid = wp.easting === null || wp.northing === null
               ? utm(wp.latitude, wp.longitude) : [wp.easting, wp.northing];
             const world = toWorld(grid); if (!world) return;
+            if (drawn.some(([x, y]) => Math.hypot(x - world[0], y - world[1]) < 0.5)) return;
+            drawn.push(world);
             const [sx, sy] = view.screenOf(world[0], world[1]);
             ctx.fillStyle = "#58a6ff";
             ctx.beginPath(); ctx.moveTo(sx, sy - 6); ctx.lineTo(sx + 6, sy); ctx.lineTo(sx, sy + 6); ctx.lineTo(sx - 6, sy); ctx.fill();
-            ctx.fillText(`${name} ${k + 1}`, sx + 8, sy + 12);
+            ctx.font = "11px system-ui, sans-serif";
+            ctx.fillText(String(k + 1), sx + 8, sy + 12);
           });
         }
       }

@@ -70,7 +70,7 @@ export default {
         if (status) {
           const unhealthy = status.components.filter((c) => !c.healthy);
           const control = status.components.find((c) => c.name === status.vehicle_control_component);
-          rows.push(["watchdog", control ? (control.detail ? flag(control.detail, "warn") : flag("fed / idle", "ok")) : "—"]);
+          rows.push(["Vehicle Control", control ? flag(control.detail || control.state, control.healthy ? "ok" : "bad") : "—"]);
           rows.push(["components", unhealthy.length ? flag(`${unhealthy.length} unhealthy`, "bad") : flag("all healthy", "ok")]);
           for (const c of unhealthy.slice(0, 4)) rows.push([c.name, c.detail || c.last_error || c.state]);
           const od = status.votes.ObstacleDetection;
