@@ -59,7 +59,7 @@ export default {
   short: "Local map",
   seed: "LocalMap · arcs",
   kinds: { "ego.traverse": null, "ego.terrain": null, "arcs.vote": null, "arcs.decision": null },
-  fps: 10,
+  fps: 5,
   create(app, body, info) {
     body.style.flexDirection = "row";
     const main = el("div", { style: "flex:1;display:flex;flex-direction:column;min-width:0" });

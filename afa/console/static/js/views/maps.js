@@ -60,7 +60,7 @@ export default {
   seed: "QtMap · Global Map",
   kinds: { pose: null, "map.traverse": null, "map.terrain": null, "map.plan": null, path: null,
            waypoints: null, truth: null },
-  fps: 10,
+  fps: 5,
   create(app, body, info) {
     body.style.flexDirection = "row";
     const main = el("div", { style: "flex:1;display:flex;flex-direction:column;min-width:0" });

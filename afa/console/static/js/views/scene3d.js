@@ -261,7 +261,7 @@ export default {
   short: "3-D",
   seed: "QtBodyViewer · QtRange3dSensor · qtEventStereo",
   kinds: { geometry: null, "range.laser": null, "range.stereo": null },
-  fps: 10,
+  fps: 5,
   create(app, body, info) {
     body.style.flexDirection = "row";
     const main = el("div", { style: "flex:1;display:flex;flex-direction:column;min-width:0" });
