@@ -45,9 +45,9 @@ async def test_the_replay_pane_drives_the_player(recording):
             reply = await http.post(f"http://127.0.0.1:{console.port}/api/replay/pause",
                                     json={})
             assert reply.status == 200 and (await reply.json())["replay"]["paused"] is True
-            bad = await http.post(f"http://127.0.0.1:{console.port}/api/replay/seek",
-                                  json={"value": "later"})
-            assert bad.status == 400
+            async with http.post(f"http://127.0.0.1:{console.port}/api/replay/seek",
+                                 json={"value": "later"}) as bad:
+                assert bad.status == 400
         assert player.paused
 
 

@@ -33,6 +33,16 @@ async def finish(system, console):
     await console.stop()
 
 
+async def call(http, method, url, **options):
+    """(status, JSON body or None), the connection released."""
+    async with http.request(method, url, **options) as response:
+        try:
+            body = await response.json()
+        except (aiohttp.ContentTypeError, ValueError):
+            body = None
+        return response.status, body
+
+
 def base(console):
     return f"http://127.0.0.1:{console.port}"
 
@@ -48,12 +58,12 @@ async def test_the_page_and_its_files_come_from_the_package_with_a_strict_policy
             assert "default-src 'none'" in policy and "connect-src 'self'" in policy
             for path in ("/static/js/main.js", "/static/js/wire.js", "/static/console.css",
                          "/static/vendor/three.module.js", "/static/vendor/three.core.js"):
-                response = await http.get(base(console) + path)
-                assert response.status == 200, path
-            script = await http.get(base(console) + "/static/js/views/maps.js")
-            assert script.headers["Content-Type"].startswith("text/javascript")
-            assert (await http.get(base(console) + "/static/../guard.py")).status == 404
-            assert (await http.get(base(console) + "/static/nothing.js")).status == 404
+                async with http.get(base(console) + path) as response:
+                    assert response.status == 200, path
+            async with http.get(base(console) + "/static/js/views/maps.js") as script:
+                assert script.headers["Content-Type"].startswith("text/javascript")
+            assert (await call(http, "GET", base(console) + "/static/../guard.py"))[0] == 404
+            assert (await call(http, "GET", base(console) + "/static/nothing.js"))[0] == 404
     finally:
         await finish(system, console)
 
@@ -62,16 +72,21 @@ async def test_other_host_names_and_other_sites_are_refused():
     system, console = await running(control=True)
     try:
         async with aiohttp.ClientSession() as http:
-            rebound = await http.get(base(console) + "/", headers={"Host": "evil.example"})
-            assert rebound.status == 403
-            forged = await http.post(base(console) + "/api/vehicle/stop", json={},
-                                     headers={"Origin": "http://evil.example"})
-            assert forged.status == 403 and "not accepted" in (await forged.json())["error"]
-            with pytest.raises(aiohttp.WSServerHandshakeError):
-                await http.ws_connect(base(console) + "/ws",
-                                      headers={"Origin": "http://evil.example"})
-            form = await http.post(base(console) + "/api/vehicle/stop", data="x=1")
-            assert form.status == 415
+            status, _ = await call(http, "GET", base(console) + "/",
+                                   headers={"Host": "evil.example"})
+            assert status == 403
+            status, body = await call(http, "POST", base(console) + "/api/vehicle/stop",
+                                      json={}, headers={"Origin": "http://evil.example"})
+            assert status == 403 and "not accepted" in body["error"]
+            # a WebSocket handshake from another site
+            status, _ = await call(http, "GET", base(console) + "/ws", headers={
+                "Origin": "http://evil.example", "Connection": "Upgrade",
+                "Upgrade": "websocket", "Sec-WebSocket-Version": "13",
+                "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ=="})
+            assert status == 403
+            status, _ = await call(http, "POST", base(console) + "/api/vehicle/stop",
+                                   data="x=1")
+            assert status == 415
     finally:
         await finish(system, console)
 
@@ -104,19 +119,20 @@ async def test_with_the_control_option_commands_need_the_token():
         assert console.url.endswith(f"/#token={console.guard.token}")
         async with aiohttp.ClientSession() as http:
             url = base(console) + "/api/components/synthetic/restart"
-            assert (await http.post(url, json={})).status == 403
-            assert (await http.post(url, json={}, headers={TOKEN_HEADER: "guess"})).status == 403
+            assert (await call(http, "POST", url, json={}))[0] == 403
+            assert (await call(http, "POST", url, json={},
+                               headers={TOKEN_HEADER: "guess"}))[0] == 403
             before = system.components["synthetic"]._scope
             done = await http.post(url, json={}, headers={TOKEN_HEADER: console.guard.token})
             assert done.status == 200 and (await done.json())["state"] == "running"
             assert system.components["synthetic"]._scope is not before  # a new life
             token = {TOKEN_HEADER: console.guard.token}
-            assert (await http.post(base(console) + "/api/components/nobody/restart", json={},
-                                    headers=token)).status == 404
-            assert (await http.post(base(console) + "/api/components/synthetic/explode",
-                                    json={}, headers=token)).status == 400
-            assert (await http.post(base(console) + "/api/vehicle/arbiter-on", json={},
-                                    headers=token)).status == 200
+            assert (await call(http, "POST", base(console) + "/api/components/nobody/restart",
+                               json={}, headers=token))[0] == 404
+            assert (await call(http, "POST", base(console) + "/api/components/synthetic/explode",
+                               json={}, headers=token))[0] == 400
+            assert (await call(http, "POST", base(console) + "/api/vehicle/arbiter-on",
+                               json={}, headers=token))[0] == 200
             replay = await http.post(base(console) + "/api/replay/play", json={})
             assert replay.status == 409 and "not a recording" in (await replay.json())["error"]
         assert system.components["RaptorService"].calls == ["setArbiter(True)"]
