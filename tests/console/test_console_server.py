@@ -192,3 +192,20 @@ def test_the_command_line_serves_the_console_and_refuses_control_without_it(caps
     with pytest.raises(SystemExit):
         main(["run", config, "--console", "nowhere"])
     assert "is not [HOST:]PORT" in capsys.readouterr().err
+
+
+def test_every_file_of_the_page_is_package_data():
+    """A file under afa/console/static that no package-data pattern names would be
+    missing from a wheel (the page would 404 on an installed afa)."""
+    import fnmatch
+    import tomllib
+
+    patterns = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "package-data"]["afa.console"]
+    static = ROOT / "afa" / "console"
+    files = [path.relative_to(static).as_posix()
+             for path in (static / "static").rglob("*") if path.is_file()]
+    assert len(files) > 20
+    missing = [f for f in files if not any(fnmatch.fnmatch(f, p) and f.count("/") ==
+                                           p.count("/") for p in patterns)]
+    assert missing == []

@@ -319,8 +319,11 @@ class App {
     const tick = (now) => {
       for (const [id, view] of Object.entries(this.views)) {
         if (!this.shown(id) || !view.dirty) continue;
-        const interval = 1000 / (view.definition.fps || 10);
+        // a new map or decision is drawn at once (they come a few times a second at most);
+        // a view that is merely busy (poses at 10 Hz) waits for its frame rate
+        const interval = view.urgent ? 30 : 1000 / (view.definition.fps || 10);
         if (last[id] !== undefined && now - last[id] < interval) continue;
+        view.urgent = false;
         last[id] = now;
         try { view.render(); } catch (error) {
           this.stats.errors++; this.stats.lastError = `${id}: ${error}`; console.error(error);

@@ -94,7 +94,7 @@ export default {
       onMessage(message) {
         const kind = message.header.kind;
         if (kind === LAYERS[this.layer]) {
-          this.map = message; this.image = null; this.pending.push(message);
+          this.map = message; this.image = null; this.pending.push(message); this.urgent = true;
         } else if (kind === "arcs.vote") {
           const name = message.event.body.behaviour;
           if (!behaviours.has(name)) {

@@ -105,6 +105,7 @@ export default {
           this.maps[key] = message;
           this.images[key] = null;
           this.pending.push(message);
+          this.urgent = true;
         } else if (kind === "path") {
           this.path = message.event;
         }
