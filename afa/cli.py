@@ -9,7 +9,8 @@ import logging
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
@@ -78,6 +79,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="with --record: chunk compression (default zstd)")
     run.add_argument("--record-no-viewer", action="store_true",
                      help="with --record: leave out the Foxglove viewer channels")
+    from afa.console import add_arguments as add_console_arguments
+
+    add_console_arguments(run)
     run.set_defaults(handler=_run)
 
     _log_parsers(commands)
@@ -138,6 +142,9 @@ def _log_parsers(commands: Any) -> None:
                              "recorded one; stop at the first divergence (exit 3)")
     replay.add_argument("--atol", type=float, default=0.0,
                         help="with --check: absolute tolerance for numbers (default 0: exact)")
+    from afa.console import add_arguments as add_console_arguments
+
+    add_console_arguments(replay)
     replay.set_defaults(handler=_log_handler("replay"))
 
     log_parser = commands.add_parser("log", help="inspect and repair recordings")
@@ -372,6 +379,7 @@ async def _run_system(args: argparse.Namespace) -> int:
         from afa.log.cli import start_recording
 
         recorder = start_recording(args, system, simulation)
+    console = _console(args, system, simulation)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -382,7 +390,7 @@ async def _run_system(args: argparse.Namespace) -> int:
     wall_start = time.monotonic()
     clock_start = clock.monotonic()
     try:
-        async with system:
+        async with _serving(console), system:
             for note in system.notes:
                 print(f"afa: {note}", file=sys.stderr)
             duration, finished = args.duration, None
@@ -434,6 +442,31 @@ async def _run_system(args: argparse.Namespace) -> int:
               f"{summary['sim_time_s']:.0f} s).", file=sys.stderr)
         return EXIT_FAILURE
     return EXIT_OK
+
+
+def _console(args: argparse.Namespace, system: Any, simulation: Any) -> Any:
+    """The browser console ``--console`` asks for, or None (afa.console)."""
+    if getattr(args, "console", None) is None and not getattr(args, "console_control", False):
+        return None
+    from afa.console import from_args
+
+    return from_args(args, system, truth=simulation)
+
+
+@asynccontextmanager
+async def _serving(console: Any) -> AsyncIterator[None]:
+    """Serve the console (if any) around the system's run; print its address."""
+    if console is None:
+        yield
+        return
+    from afa.console import exposure_warning
+
+    async with console:
+        print(f"afa: console at {console.url}", file=sys.stderr, flush=True)
+        warning = exposure_warning(console)
+        if warning is not None:
+            print(f"afa: warning: {warning}", file=sys.stderr)
+        yield
 
 
 async def _close(simulation: Any) -> None:

@@ -230,6 +230,8 @@ class RaptorSimulation:
         self._next_waypoint = 0
         self._digest = hashlib.sha256()
         self._pose_errors = RunningError()  # constant memory however long the run
+        self._last_pose_error: tuple[float, float] | None = None  # for displays
+        self._waypoints_utm: list[list[float]] | None = None
         self.fakes: list[Any] = []
         self.endpoints: dict[str, str] = {}  # component -> pty path or host:port
         self._shared: dict[str, Any] = {}
@@ -552,7 +554,9 @@ class RaptorSimulation:
         if sign:
             self._steering_sign = sign
 
-    def _pose_error(self, pose: PoseTransformIDL) -> None:
+    def _truth_utm(self) -> tuple[float, float, float, int]:
+        """The vehicle reference point's true UTM easting, northing, grid yaw (rad,
+        counter-clockwise from grid east) and zone."""
         state = self.state
         lat, lon = self.world.origin.to_geodetic(state.east, state.north)
         utm = latlon_to_utm(lat, lon)
@@ -561,12 +565,38 @@ class RaptorSimulation:
         utm_ahead = latlon_to_utm(*ahead, zone=utm.zone_number)
         grid_yaw = math.atan2(utm_ahead.northing_m - utm.northing_m,
                               utm_ahead.easting_m - utm.easting_m)
+        return utm.easting_m, utm.northing_m, grid_yaw, utm.zone_number
+
+    def _pose_error(self, pose: PoseTransformIDL) -> None:
+        easting, northing, grid_yaw, _ = self._truth_utm()
         east = pose.HTransform[0, 3] + pose.initialUTM[0]
         north = pose.HTransform[1, 3] + pose.initialUTM[1]
         yaw = math.atan2(pose.HTransform[1, 0], pose.HTransform[0, 0])
-        self._pose_errors.add(self.sim_time,
-                              math.hypot(east - utm.easting_m, north - utm.northing_m),
-                              math.degrees(math.remainder(yaw - grid_yaw, 2 * math.pi)))
+        error = (math.hypot(east - easting, north - northing),
+                 math.degrees(math.remainder(yaw - grid_yaw, 2 * math.pi)))
+        self._pose_errors.add(self.sim_time, *error)
+        self._last_pose_error = error
+
+    def truth(self) -> dict[str, Any]:
+        """Ground truth now, for displays (the browser console's pose error and map
+        overlay): the vehicle reference point's true UTM position and grid heading, the
+        latest pose error (``None`` before the first Pose), the mission's waypoints in UTM
+        and how many were reached, the collisions so far."""
+        easting, northing, grid_yaw, zone = self._truth_utm()
+        if self._waypoints_utm is None:
+            self._waypoints_utm = []
+            for waypoint in self.world.mission.waypoints:
+                utm = latlon_to_utm(waypoint.latitude, waypoint.longitude, zone=zone)
+                self._waypoints_utm.append([utm.easting_m, utm.northing_m])
+        error = self._last_pose_error
+        return {"world": self.world.name, "sim_time": self.sim_time,
+                "utm": [easting, northing], "heading_deg": math.degrees(grid_yaw),
+                "speed": self.state.speed, "distance": self.state.distance,
+                "pose_error_m": None if error is None else error[0],
+                "heading_error_deg": None if error is None else error[1],
+                "waypoints_utm": list(self._waypoints_utm),
+                "waypoints_reached": self.waypoints_reached,
+                "patrol": self.world.mission.patrol, "collisions": len(self.collisions)}
 
     def summary(self) -> dict[str, Any]:
         """The simulation's part of the run summary."""

@@ -12,7 +12,7 @@ import contextlib
 import json
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 from typing import Any
 
 import numpy as np
@@ -274,7 +274,7 @@ async def _replay(args: argparse.Namespace, speed: float | None) -> int:
           f"; publishing {len({c.event for c in player.replayed.values()})} recorded topic(s); "
           f"answering polls for {', '.join(player.servants) or 'no server'}", file=sys.stderr)
     wall = time.monotonic()
-    async with player:
+    async with _console(args, player), player:
         with _keyboard(player):
             await player.run()
         replayed = player.elapsed - (args.start or 0.0)
@@ -285,6 +285,25 @@ async def _replay(args: argparse.Namespace, speed: float | None) -> int:
           f"(x{replayed / wall if wall > 0 else float('inf'):.1f}); "
           f"{player.published} events published")
     return EXIT_OK
+
+
+@contextlib.asynccontextmanager
+async def _console(args: argparse.Namespace, player: Any) -> AsyncIterator[None]:
+    """The browser console on the replay (``--console``): its replay pane drives the
+    player (afa.console)."""
+    if getattr(args, "console", None) is None and not getattr(args, "console_control", False):
+        yield
+        return
+    from afa.console import exposure_warning, from_args
+
+    console = from_args(args, player.system, replay=player)
+    assert console is not None
+    async with console:
+        print(f"afa: console at {console.url}", file=sys.stderr, flush=True)
+        warning = exposure_warning(console)
+        if warning is not None:
+            print(f"afa: warning: {warning}", file=sys.stderr)
+        yield
 
 
 KEYS = {

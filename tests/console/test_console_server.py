@@ -1,0 +1,211 @@
+"""The console's web server on loopback: the page, the WebSocket, the guard, the actions,
+and the command line. Real sockets, a real aiohttp client; the system runs on the wall
+clock (a second or two per test)."""
+
+import importlib.util
+import json
+import socket
+from pathlib import Path
+
+import aiohttp
+import pytest
+from console_synthetic import synthetic_system
+
+from afa import WallClock
+from afa.cli import main
+from afa.console import Console, ConsoleError, ConsoleOptions
+from afa.console.frames import decode_frame
+from afa.console.guard import TOKEN_HEADER
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+async def running(control=False, **options):
+    system = synthetic_system(WallClock())
+    console = Console(system, ConsoleOptions(port=0, control=control, **options))
+    await console.start()
+    await system.start()
+    return system, console
+
+
+async def finish(system, console):
+    await system.stop()
+    await console.stop()
+
+
+async def call(http, method, url, **options):
+    """(status, JSON body or None), the connection released."""
+    async with http.request(method, url, **options) as response:
+        try:
+            body = await response.json()
+        except (aiohttp.ContentTypeError, ValueError):
+            body = None
+        return response.status, body
+
+
+def base(console):
+    return f"http://127.0.0.1:{console.port}"
+
+
+async def test_the_page_and_its_files_come_from_the_package_with_a_strict_policy():
+    system, console = await running()
+    try:
+        async with aiohttp.ClientSession() as http:
+            page = await http.get(base(console) + "/")
+            assert page.status == 200 and "text/html" in page.headers["Content-Type"]
+            assert '<script type="module" src="/static/js/main.js">' in await page.text()
+            policy = page.headers["Content-Security-Policy"]
+            assert "default-src 'none'" in policy and "connect-src 'self'" in policy
+            for path in ("/static/js/main.js", "/static/js/wire.js", "/static/console.css",
+                         "/static/vendor/three.module.js", "/static/vendor/three.core.js"):
+                async with http.get(base(console) + path) as response:
+                    assert response.status == 200, path
+            async with http.get(base(console) + "/static/js/views/maps.js") as script:
+                assert script.headers["Content-Type"].startswith("text/javascript")
+            assert (await call(http, "GET", base(console) + "/static/../guard.py"))[0] == 404
+            assert (await call(http, "GET", base(console) + "/static/nothing.js"))[0] == 404
+    finally:
+        await finish(system, console)
+
+
+async def test_other_host_names_and_other_sites_are_refused():
+    system, console = await running(control=True)
+    try:
+        async with aiohttp.ClientSession() as http:
+            status, _ = await call(http, "GET", base(console) + "/",
+                                   headers={"Host": "evil.example"})
+            assert status == 403
+            status, body = await call(http, "POST", base(console) + "/api/vehicle/stop",
+                                      json={}, headers={"Origin": "http://evil.example"})
+            assert status == 403 and "not accepted" in body["error"]
+            # a WebSocket handshake from another site
+            status, _ = await call(http, "GET", base(console) + "/ws", headers={
+                "Origin": "http://evil.example", "Connection": "Upgrade",
+                "Upgrade": "websocket", "Sec-WebSocket-Version": "13",
+                "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ=="})
+            assert status == 403
+            status, _ = await call(http, "POST", base(console) + "/api/vehicle/stop",
+                                   data="x=1")
+            assert status == 415
+    finally:
+        await finish(system, console)
+
+
+async def test_without_the_control_option_commands_are_refused_but_stop_vehicle_works():
+    system, console = await running(control=False)
+    control = system.components["RaptorService"]
+    synthetic = system.components["synthetic"]
+    try:
+        async with aiohttp.ClientSession() as http:
+            for path in ("/api/components/synthetic/restart", "/api/vehicle/start",
+                         "/api/vehicle/arbiter-on"):
+                refused = await http.post(base(console) + path, json={},
+                                          headers={TOKEN_HEADER: console.guard.token})
+                assert refused.status == 403, path
+                assert "--console-control" in (await refused.json())["error"]
+            assert synthetic.state.value == "running" and synthetic.restarts == 0
+            stop = await http.post(base(console) + "/api/vehicle/stop", json={},
+                                   headers={"Origin": base(console)})
+            assert stop.status == 200 and (await stop.json())["served_by"] == "RaptorMotion"
+        assert control.calls == ["stopVehicle"]
+        assert console.url == base(console) + "/"  # no token without control
+    finally:
+        await finish(system, console)
+
+
+async def test_with_the_control_option_commands_need_the_token():
+    system, console = await running(control=True)
+    try:
+        assert console.url.endswith(f"/#token={console.guard.token}")
+        async with aiohttp.ClientSession() as http:
+            url = base(console) + "/api/components/synthetic/restart"
+            assert (await call(http, "POST", url, json={}))[0] == 403
+            assert (await call(http, "POST", url, json={},
+                               headers={TOKEN_HEADER: "guess"}))[0] == 403
+            before = system.components["synthetic"]._scope
+            done = await http.post(url, json={}, headers={TOKEN_HEADER: console.guard.token})
+            assert done.status == 200 and (await done.json())["state"] == "running"
+            assert system.components["synthetic"]._scope is not before  # a new life
+            token = {TOKEN_HEADER: console.guard.token}
+            assert (await call(http, "POST", base(console) + "/api/components/nobody/restart",
+                               json={}, headers=token))[0] == 404
+            assert (await call(http, "POST", base(console) + "/api/components/synthetic/explode",
+                               json={}, headers=token))[0] == 400
+            assert (await call(http, "POST", base(console) + "/api/vehicle/arbiter-on",
+                               json={}, headers=token))[0] == 200
+            replay = await http.post(base(console) + "/api/replay/play", json={})
+            assert replay.status == 409 and "not a recording" in (await replay.json())["error"]
+        assert system.components["RaptorService"].calls == ["setArbiter(True)"]
+    finally:
+        await finish(system, console)
+
+
+async def test_the_websocket_says_hello_then_sends_what_was_asked_for():
+    system, console = await running()
+    try:
+        async with aiohttp.ClientSession() as http:
+            ws = await http.ws_connect(base(console) + "/ws", headers={"Origin": base(console)})
+            hello, events = decode_frame(await ws.receive_bytes(timeout=5))
+            assert hello["kind"] == "hello" and events == [] and hello["control"] is False
+            assert hello["policies"]["map.traverse"]["rate"] == 1.0
+            await ws.send_str("not json")
+            await ws.send_str(json.dumps({"op": "subscribe", "kinds": {"arcs.vote": None,
+                                                                       "status": None}}))
+            seen = set()
+            while not {"arcs.vote", "status"} <= seen:
+                header, events = decode_frame(await ws.receive_bytes(timeout=5))
+                seen.add(header["kind"])
+                if header["kind"] == "arcs.vote":
+                    assert events[0].body.behaviour == header["stream"].split("/")[1]
+            assert seen == {"arcs.vote", "status"}
+            status = await (await http.get(base(console) + "/api/status")).json()
+            assert [row["name"] for row in status["components"]] == [
+                "modelServer", "synthetic", "RaptorService"]
+            await ws.close()
+    finally:
+        await finish(system, console)
+
+
+async def test_a_busy_port_and_a_missing_extra_are_clear_errors(monkeypatch):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        console = Console(synthetic_system(WallClock()), ConsoleOptions(port=port))
+        with pytest.raises(ConsoleError, match=f"cannot listen on 127.0.0.1:{port}"):
+            await console.start()
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "aiohttp" else real(name, *a))
+    with pytest.raises(ConsoleError, match=r"pip install 'afa\[console\]'"):
+        Console(synthetic_system(WallClock()))
+
+
+def test_the_command_line_serves_the_console_and_refuses_control_without_it(capsys):
+    config = str(ROOT / "configs" / "raptor.xml")
+    assert main(["run", config, "--sim", "--fast", "--duration", "1",
+                 "--console-control"]) == 1
+    assert "--console-control needs --console" in capsys.readouterr().err
+    assert main(["run", config, "--sim", "--fast", "--duration", "2", "--console", "0"]) == 0
+    err = capsys.readouterr().err
+    assert "afa: console at http://127.0.0.1:" in err and "#token" not in err
+    with pytest.raises(SystemExit):
+        main(["run", config, "--console", "nowhere"])
+    assert "is not [HOST:]PORT" in capsys.readouterr().err
+
+
+def test_every_file_of_the_page_is_package_data():
+    """A file under afa/console/static that no package-data pattern names would be
+    missing from a wheel (the page would 404 on an installed afa)."""
+    import fnmatch
+    import tomllib
+
+    patterns = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "package-data"]["afa.console"]
+    static = ROOT / "afa" / "console"
+    files = [path.relative_to(static).as_posix()
+             for path in (static / "static").rglob("*") if path.is_file()]
+    assert len(files) >= 17
+    missing = [f for f in files if not any(fnmatch.fnmatch(f, p) and f.count("/") ==
+                                           p.count("/") for p in patterns)]
+    assert missing == []
