@@ -171,8 +171,8 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
 def _steps(n_seg: int, seg: float, block: int, res: float) -> tuple[FloatArray, FloatArray]:
     """Where each segment starts along a ray and where its samples lie within it (m),
     read-only: the same for every cast with one terrain, block and range."""
-    starts = seg * np.arange(n_seg)
-    offsets = res * np.arange(block + 1)
+    starts: FloatArray = seg * np.arange(n_seg, dtype=np.float64)
+    offsets: FloatArray = res * np.arange(block + 1, dtype=np.float64)
     starts.flags.writeable = offsets.flags.writeable = False
     return starts, offsets
 
