@@ -1,55 +1,182 @@
-"""Simulation speed: the world, every emulator and every sensing component in virtual time.
+"""Simulation speed: how many times faster than real time the simulated Raptor runs.
 
-Prints the real-time factor of the whole stack of ``configs/raptor.xml`` under ``--fast``
-(world physics, GPS/IMU/MPC555/laser/stereo emulators on the real wire protocols, the real
-drivers decoding them, ModelServer) and the cost of the ray casting behind one laser scan
-line and one stereo frame. Target (issue 5): the whole sensing stack at >= 20x real time.
+The reference workload is ``configs/raptor.xml`` on one world, seed and duration under
+``--fast`` (virtual time), in two stacks:
 
-Usage: ``python benchmarks/sim.py [--duration S] [--world FILE] [--repeat N] [--json]``
+- **sensing**: the drivers and ModelServer only (NodLaser x2, Stereo, Imu, GpsSokkia,
+  WheelOdometry, VehicleControl, ModelServer: the Launcher entries of those types),
+  with the emulators on the real wire protocols, the world's physics and the run
+  digest; the vehicle follows the world's drive script (tele-operation);
+- **autonomous**: every configured component (maps, planners, arbiter), the
+  simulation playing the control station as ``afa run --sim`` does.
+
+Each run is a fresh interpreter (``--one``), so no run inherits another's caches; the
+two stacks alternate (sensing, autonomous, sensing, ...) and the medians of the trials
+are printed: the real-time factor by wall time and by CPU time of the process (the
+second is less disturbed by other work on the machine). Start-up (configuration,
+imports) is not counted. ``--components`` adds one sampled run of the autonomous stack
+that splits its CPU time between the components, the emulators, the simulation and the
+framework (ms of CPU per simulated second). ``--rays`` adds the cost of the ray casting
+behind one laser scan line and one stereo frame.
+
+The targets (issues): sensing >= 20x, autonomous >= 10x real time on a 2-core
+machine. This script prints figures; it never asserts them.
+
+Usage::
+
+    python benchmarks/sim.py [--world rock-field] [--seed 0] [--duration 60]
+                             [--trials 3] [--components] [--rays] [--json]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
 import json
 import logging
 import math
+import os
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
-
-import numpy as np
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from afa import VirtualClock  # noqa: E402
-from afa.sim.raycast import cast_rays, depth_image  # noqa: E402
-from components.simulation import RaptorSimulation  # noqa: E402
-from components.stereo.emulator import STEREO_SUBSAMPLE  # noqa: E402
-
-#: Issue 5's target for the whole sensing stack under --fast.
-TARGET = 20.0
+#: The Launcher types of the sensing stack: the device drivers and ModelServer.
+SENSING_TYPES = ("NodLaser", "Stereo", "Imu", "GpsSokkia", "WheelOdometry", "VehicleControl",
+                 "ModelServer")
+TARGETS = {"sensing": 20.0, "autonomous": 10.0}
+CONFIG = ROOT / "configs" / "raptor.xml"
 
 
-async def whole_stack(world: Path, duration: float) -> dict[str, float]:
-    simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml", world,
-                                           clock=VirtualClock(), seed=0, teleop=True)
-    start = time.perf_counter()
+def world_path(name: str) -> Path:
+    path = Path(name)
+    return path if path.suffix == ".xml" else ROOT / "configs" / "worlds" / f"{name}.xml"
+
+
+def sensing_components() -> list[str]:
+    from afa.config.loader import load_configuration
+
+    entries = load_configuration(CONFIG).launcher.Components
+    return [e.Name for e in entries if e.Enabled and e.Type in SENSING_TYPES]
+
+
+# -- one run (in its own interpreter) -------------------------------------------------------
+
+
+async def _run(stack: str, world: Path, seed: int, duration: float,
+               sampler: Sampler | None) -> dict[str, Any]:
+    from afa import VirtualClock
+    from components.simulation import RaptorSimulation
+
+    options: dict[str, Any] = {}
+    if stack == "sensing":
+        options["only"] = sensing_components()
+    simulation = RaptorSimulation.from_xml(CONFIG, world, clock=VirtualClock(), seed=seed,
+                                           teleop=stack == "sensing", **options)
+    wall, cpu = time.perf_counter(), time.process_time()
+    if sampler is not None:
+        sampler.start()
     async with simulation:
         await simulation.system.run(duration)
         events = sum(simulation.system.statistics()["events"].values())
-    wall = time.perf_counter() - start
-    return {"sim_time_s": round(simulation.sim_time, 2), "wall_time_s": round(wall, 3),
-            "realtime_factor": round(simulation.sim_time / wall, 2), "events": events,
-            "events_per_wall_s": round(events / wall)}
+    if sampler is not None:
+        sampler.stop()
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    sim_time = simulation.sim_time
+    result: dict[str, Any] = {
+        "stack": stack, "components": len(simulation.system.components),
+        "sim_time_s": round(sim_time, 3), "wall_s": round(wall, 3), "cpu_s": round(cpu, 3),
+        "realtime_factor": round(sim_time / wall, 2),
+        "cpu_realtime_factor": round(sim_time / cpu, 2), "events": events,
+        "event_digest": simulation.summary()["event_digest"]}
+    if sampler is not None:
+        result["owners_ms_per_sim_s"] = {
+            owner: round(1e3 * cpu * share / sim_time, 2)
+            for owner, share in sampler.shares().most_common()}
+    return result
+
+
+def one(stack: str, world: Path, seed: int, duration: float, components: bool) -> None:
+    """A single run, its figures as one JSON line on stdout."""
+    logging.disable(logging.WARNING)  # start-up notes and the run's own warnings
+    sampler = Sampler() if components else None
+    print(json.dumps(asyncio.run(_run(stack, world, seed, duration, sampler))))
+
+
+# -- where the CPU time goes ------------------------------------------------------------------
+
+
+class Sampler:
+    """A statistical CPU profile by owner: every ``interval`` seconds of the process's
+    CPU time (``SIGPROF``) the signal handler, which Python runs in the main thread
+    between bytecodes, charges one sample to the owner of the innermost frame that has
+    one: a component (by name; a driver's reactor counts as its component), a device
+    emulator (by class), the simulation (physics, drive script or mission, digest and
+    summary), or else the framework (event loop, virtual clock, channel, polls)."""
+
+    def __init__(self, interval: float = 0.002) -> None:
+        self.interval = interval
+        self.samples: collections.Counter[str] = collections.Counter()
+
+    def start(self) -> None:
+        import signal
+
+        from afa.component import Component
+        from afa.fake import FakeDevice
+        from afa.reactor import Reactor
+        from components.simulation import RaptorSimulation
+
+        self._kinds = (Component, Reactor, FakeDevice, RaptorSimulation)
+        signal.signal(signal.SIGPROF, self._sample)
+        signal.setitimer(signal.ITIMER_PROF, self.interval, self.interval)
+
+    def stop(self) -> None:
+        import signal
+
+        signal.setitimer(signal.ITIMER_PROF, 0.0, 0.0)
+        signal.signal(signal.SIGPROF, signal.SIG_DFL)
+
+    def shares(self) -> collections.Counter[str]:
+        total = sum(self.samples.values()) or 1
+        return collections.Counter({k: v / total for k, v in self.samples.items()})
+
+    def _sample(self, signum: int, frame: Any) -> None:
+        self.samples[self._owner(frame)] += 1
+
+    def _owner(self, frame: Any) -> str:
+        component, reactor, fake, simulation = self._kinds
+        while frame is not None:
+            code = frame.f_code
+            if code.co_argcount and code.co_varnames[0] == "self":
+                obj = frame.f_locals.get("self")
+                if isinstance(obj, (component, reactor)):
+                    return str(obj.name)
+                if isinstance(obj, fake):
+                    return f"emulator {type(obj).__name__}"
+                if isinstance(obj, simulation):
+                    return "simulation"
+            frame = frame.f_back
+        return "framework"
+
+
+# -- ray casting --------------------------------------------------------------------------------
 
 
 def ray_casting(world: Path, repeat: int = 50) -> dict[str, float]:
-    clock = VirtualClock()
-    simulation = RaptorSimulation(world, clock, seed=0)
+    import numpy as np
+
+    from afa import VirtualClock
+    from afa.sim.raycast import cast_rays, depth_image
+    from components.simulation import RaptorSimulation
+    from components.stereo.emulator import STEREO_SUBSAMPLE
+
+    simulation = RaptorSimulation(world, VirtualClock(), seed=0)
     pose = simulation.frame_pose("FrontNoddingSICKLeft:AxleCenterFreeEnd")
     bearings = np.deg2rad(np.arange(361) * 0.5)
     nod = math.radians(-25.0)
@@ -57,52 +184,114 @@ def ray_casting(world: Path, repeat: int = 50) -> dict[str, float]:
                       np.sin(bearings) * math.sin(nod)], axis=1)
     directions = local @ pose[:3, :3].T
 
-    def timed(fn, n):
+    def timed(fn: Any, n: int) -> float:
         samples = []
         for _ in range(n):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             fn()
-            samples.append(time.perf_counter() - t0)
+            samples.append(time.process_time() - t0)
         return statistics.median(samples)
 
     scan = timed(lambda: cast_rays(simulation.terrain, pose[:3, 3], directions, 8.183), repeat)
-    camera = simulation._frame("Digiclops:ImagePlane")
-    full = timed(lambda: depth_image(simulation.terrain, camera[:3, 3], camera[:3, :3], 320, 240,
-                                     66.0, 10.0), 5)
-    coarse = timed(lambda: depth_image(simulation.terrain, camera[:3, 3], camera[:3, :3],
-                                       320 // STEREO_SUBSAMPLE, 240 // STEREO_SUBSAMPLE, 66.0,
-                                       10.0), 20)
+    camera = simulation.frame_pose("Digiclops:ImagePlane")
+    w, h = 320 // STEREO_SUBSAMPLE, 240 // STEREO_SUBSAMPLE
+    coarse = timed(lambda: depth_image(simulation.terrain, camera[:3, 3], camera[:3, :3], w, h,
+                                       66.0, 10.0), 20)
     return {"laser_scan_361_rays_ms": round(scan * 1e3, 3),
-            "stereo_frame_320x240_ms": round(full * 1e3, 2),
-            f"stereo_frame_{320 // STEREO_SUBSAMPLE}x{240 // STEREO_SUBSAMPLE}_ms":
-                round(coarse * 1e3, 2)}
+            f"stereo_frame_{w}x{h}_ms": round(coarse * 1e3, 2)}
+
+
+# -- the driver ---------------------------------------------------------------------------------
+
+
+def spawn(stack: str, args: argparse.Namespace, components: bool = False) -> dict[str, Any]:
+    command = [sys.executable, str(Path(__file__).resolve()), "--one", stack,
+               "--world", str(world_path(args.world)), "--seed", str(args.seed),
+               "--duration", str(args.duration)]
+    if components:
+        command.append("--components")
+    done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    if done.returncode != 0:
+        raise SystemExit(f"benchmark run failed ({' '.join(command)}):\n{done.stderr}")
+    return json.loads(done.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    def med(key: str) -> float:
+        return round(statistics.median(r[key] for r in runs), 2)
+
+    return {"sim_time_s": runs[0]["sim_time_s"], "components": runs[0]["components"],
+            "events": runs[0]["events"], "trials": len(runs),
+            "realtime_factor": med("realtime_factor"),
+            "realtime_factor_range": [min(r["realtime_factor"] for r in runs),
+                                      max(r["realtime_factor"] for r in runs)],
+            "cpu_realtime_factor": med("cpu_realtime_factor"),
+            "cpu_realtime_factor_range": [min(r["cpu_realtime_factor"] for r in runs),
+                                          max(r["cpu_realtime_factor"] for r in runs)],
+            "wall_s": med("wall_s"), "cpu_s": med("cpu_s"),
+            "event_digests": sorted({r["event_digest"] for r in runs})}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=60.0)
-    parser.add_argument("--world", type=Path,
-                        default=ROOT / "configs" / "worlds" / "open-field.xml")
-    parser.add_argument("--repeat", type=int, default=3,
-                        help="whole-stack runs; the median is reported (default 3)")
+    parser.add_argument("--world", default="rock-field",
+                        help="a shipped world's name or a world file (default rock-field)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--duration", type=float, default=60.0,
+                        help="simulated seconds per run (default 60)")
+    parser.add_argument("--trials", type=int, default=3,
+                        help="runs of each stack, interleaved; medians reported (default 3)")
+    parser.add_argument("--components", action="store_true",
+                        help="one more, sampled run of the autonomous stack: CPU per owner")
+    parser.add_argument("--rays", action="store_true", help="ray casting costs too")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--one", choices=("sensing", "autonomous"), help=argparse.SUPPRESS)
     args = parser.parse_args()
-    logging.disable(logging.WARNING)  # the notes about components not written yet
-    runs = [asyncio.run(whole_stack(args.world, args.duration)) for _ in range(args.repeat)]
-    factors = [run["realtime_factor"] for run in runs]
-    stack = sorted(runs, key=lambda run: run["realtime_factor"])[len(runs) // 2]
-    stack["realtime_factor_min"], stack["realtime_factor_max"] = min(factors), max(factors)
-    results = {"whole_stack": stack, "ray_casting": ray_casting(args.world)}
+    if args.one:
+        one(args.one, world_path(args.world), args.seed, args.duration, args.components)
+        return
+
+    runs: dict[str, list[dict[str, Any]]] = {"sensing": [], "autonomous": []}
+    for _ in range(args.trials):
+        for stack in runs:
+            runs[stack].append(spawn(stack, args))
+    results: dict[str, Any] = {
+        "workload": {"config": "configs/raptor.xml", "world": args.world, "seed": args.seed,
+                     "duration_s": args.duration, "cpus": os.cpu_count(),
+                     "load_average": [round(x, 2) for x in os.getloadavg()]},
+        **{stack: summarise(r) for stack, r in runs.items()}}
+    if args.components:
+        results["autonomous_components"] = spawn("autonomous", args, components=True)
+    if args.rays:
+        results["ray_casting"] = ray_casting(world_path(args.world))
     if args.json:
         print(json.dumps(results, indent=2))
         return
-    print(f"whole sensing stack, {args.world.name}: {stack['sim_time_s']} s simulated in "
-          f"{stack['wall_time_s']} s wall = {stack['realtime_factor']}x real time, median of "
-          f"{len(runs)} (range {min(factors)}-{max(factors)}x; target {TARGET:g}x: "
-          f"{'met' if stack['realtime_factor'] >= TARGET else 'NOT met'}) "
-          f"({stack['events']} events, {stack['events_per_wall_s']}/s wall)")
-    for name, value in results["ray_casting"].items():
-        print(f"  {name:28s} {value}")
+
+    w = results["workload"]
+    print(f"{w['config']}, world {w['world']}, seed {w['seed']}, {w['duration_s']:g} s "
+          f"simulated per run, {args.trials} interleaved trials per stack, medians "
+          f"({w['cpus']} CPUs, load average {w['load_average'][0]:g} at the end)")
+    for stack in ("sensing", "autonomous"):
+        r = results[stack]
+        lo, hi = r["realtime_factor_range"]
+        clo, chi = r["cpu_realtime_factor_range"]
+        print(f"  {stack:10s} ({r['components']:2d} components, {r['events']} events): "
+              f"{r['realtime_factor']:6.2f}x real time by wall clock ({lo}-{hi}), "
+              f"{r['cpu_realtime_factor']:6.2f}x by CPU time ({clo}-{chi}); "
+              f"target {TARGETS[stack]:g}x")
+        if len(r["event_digests"]) != 1:
+            print(f"    the runs' event digests differ: {r['event_digests']}")
+    if args.components:
+        r = results["autonomous_components"]
+        print(f"  where the autonomous stack's CPU goes (one sampled run, "
+              f"{r['cpu_realtime_factor']}x by CPU time), ms of CPU per simulated second:")
+        for owner, ms in r["owners_ms_per_sim_s"].items():
+            print(f"    {owner:28s} {ms:7.2f}")
+    if args.rays:
+        for name, value in results["ray_casting"].items():
+            print(f"  {name:28s} {value}")
 
 
 if __name__ == "__main__":

@@ -54,7 +54,7 @@ certainty 0..1 and maximum speed; :meth:`ArcVotes.to_idl` turns it into the
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated, Any
 
 import numpy as np
@@ -336,6 +336,10 @@ class ArcVotes:
     vote: NDArray[np.float64]
     certainty: NDArray[np.float64]
     max_speed: NDArray[np.float64]
+    #: the last event body built from these votes, with its behaviour and arc set
+    #: (see :meth:`to_idl`)
+    _published: tuple[str, ArcSet, ArcVoteIDL] | None = field(
+        default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         veto = np.array(self.veto, dtype=bool)
@@ -383,13 +387,24 @@ class ArcVotes:
     def to_idl(self, *, time: TimeIDL, behaviour: str, arcs: ArcSet) -> ArcVoteIDL:
         """The ``ArcVoteIDL`` event body over ``arcs``.
 
+        Votes are immutable and a behaviour often publishes the same ones scan after
+        scan (Obstacle Detection's "clear"): the body is validated the first time, and
+        later bodies for the same behaviour and arc set are that one with the new time
+        stamp (equal to a validated construction; tests/components/test_arcs.py).
+
         Raises :class:`ArcSetMismatchError` if the votes are not one per arc of ``arcs``.
         """
         if len(self) != len(arcs):
             raise ArcSetMismatchError(f"{len(self)} votes for an arc set of {len(arcs)}")
-        return ArcVoteIDL(time=time, behaviour=behaviour, curvatures=arcs.curvatures,
+        last = self._published
+        if (last is not None and last[0] == behaviour and last[1] is arcs
+                and isinstance(time, TimeIDL)):
+            return last[2].model_copy(update={"time": time})
+        body = ArcVoteIDL(time=time, behaviour=behaviour, curvatures=arcs.curvatures,
                           veto=self.veto, vote=self.vote, certainty=self.certainty,
                           maxSpeed=self.max_speed)
+        object.__setattr__(self, "_published", (behaviour, arcs, body))
+        return body
 
 
 #: The configuration section every voting behaviour and the arbiter read the arc set from.

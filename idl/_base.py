@@ -33,6 +33,7 @@ import re
 import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -152,6 +153,15 @@ class Array:
 
     dtype: str
     shape: tuple[int | None, ...]
+    # derived once: validation runs for every array of every event body
+    _numpy_dtype: np.dtype[Any] = dataclass_field(init=False, repr=False, compare=False)
+    _fixed: tuple[tuple[int, int], ...] = dataclass_field(init=False, repr=False,
+                                                          compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_numpy_dtype", np.dtype(self.dtype))
+        object.__setattr__(self, "_fixed", tuple((axis, size) for axis, size
+                                                 in enumerate(self.shape) if size is not None))
 
     def __get_pydantic_core_schema__(
         self, source: Any, handler: GetCoreSchemaHandler
@@ -186,20 +196,25 @@ class Array:
         }
 
     def _validate(self, value: Any, info: ValidationInfo) -> np.ndarray:
-        if isinstance(value, Mapping) and "dtype" in value:
+        if not isinstance(value, np.ndarray) and isinstance(value, Mapping) \
+                and "dtype" in value:
             value = self._from_mapping(value, info.context)
         try:
-            array = np.asarray(value, dtype=np.dtype(self.dtype))
+            array = np.asarray(value, dtype=self._numpy_dtype)
         except (TypeError, ValueError) as exc:
             raise PydanticCustomError("ndarray", "not an array of {dtype}: {err}",
                                       {"dtype": self.dtype, "err": str(exc)}) from None
-        if array.ndim != len(self.shape) or any(
-            want is not None and got != want
-            for got, want in zip(array.shape, self.shape, strict=True)
-        ):
+        shape = array.shape
+        fits = len(shape) == len(self.shape)
+        if fits:
+            for axis, size in self._fixed:
+                if shape[axis] != size:
+                    fits = False
+                    break
+        if not fits:
             raise PydanticCustomError(
                 "ndarray_shape", "array shape {got} does not match {want}",
-                {"got": array.shape, "want": tuple("n" if d is None else d for d in self.shape)},
+                {"got": shape, "want": tuple("n" if d is None else d for d in self.shape)},
             )
         if array.flags.writeable:
             array = array.copy()

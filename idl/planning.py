@@ -154,20 +154,20 @@ class ArcVoteIDL(_Struct):
             if getattr(self, name).shape[0] != n:
                 raise ValueError(f"{name} has {getattr(self, name).shape[0]} entries, "
                                  f"curvatures has {n}")
-        if not np.all(np.isfinite(self.curvatures)):
+        if not np.isfinite(self.curvatures).all():
             raise ValueError("curvatures must be finite")
         for name in ("vote", "certainty"):
             values = getattr(self, name)
-            if not np.all((values >= 0.0) & (values <= 1.0)):
+            if not ((values >= 0.0) & (values <= 1.0)).all():
                 raise ValueError(f"{name} must lie in 0..1")
-        if not np.all((self.maxSpeed >= 0.0) & np.isfinite(self.maxSpeed)):
+        if not ((self.maxSpeed >= 0.0) & np.isfinite(self.maxSpeed)).all():
             raise ValueError("maxSpeed must be finite and ≥ 0")
         return self
 
     @property
     def all_vetoed(self) -> bool:
         """True if every arc is vetoed (a halt), or there are no arcs."""
-        return bool(np.all(self.veto))
+        return bool(self.veto.all())
 
 
 class ArcDecisionIDL(_Struct):

@@ -63,9 +63,9 @@ def _check_static(points: np.ndarray, valid: np.ndarray, what: str) -> None:
         raise ValueError(f"{what}: valid has shape {valid.shape}, points need "
                          f"{points.shape[:-1]}")
     finite = np.isfinite(points)
-    if not np.all(finite[valid]):
+    if not finite[valid].all():
         raise ValueError(f"{what}: a valid point has a non-finite coordinate")
-    if not np.all(np.isnan(points[~valid])):
+    if not np.isnan(points[~valid]).all():
         raise ValueError(f"{what}: invalid slots must hold NaN in all coordinates")
 
 
@@ -78,7 +78,7 @@ def select_valid(points: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
 
 def _check_sequence(points: np.ndarray, what: str) -> None:
-    if not np.all(np.isfinite(points)):
+    if not np.isfinite(points).all():
         raise ValueError(f"{what}: a sequence holds only valid (finite) points")
 
 

@@ -88,7 +88,7 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     blocks = terrain.block_max(block)
     by, bx = blocks.shape
     bmax = blocks.ravel()
-    starts = seg * np.arange(n_seg)
+    starts, offsets = _steps(n_seg, seg, block, res)
     # z is linear along a segment: its lowest point is the start, or the end if falling
     # (lowered by a micrometre, against rounding differences with the fine pass)
     z_low = (oz - 1e-6 + np.minimum(dz, 0.0) * seg)[:, None] + dz[:, None] * starts
@@ -115,7 +115,7 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     found = np.zeros(n_rays, dtype=bool)
     done = 0
     step = res  # one sample per grid cell; the hit is refined by interpolation
-    offsets = step * np.arange(block + 1)
+    width_t = block + 1  # samples per segment: row r, sample p is r * width_t + p flat
     # two at once saves a round of ~60 small array operations; a big batch (a depth
     # image) is bound by memory instead, where the extra samples cost more than a round
     take = 2 if n_rays <= 1024 else 1
@@ -138,32 +138,43 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
         if shared:
             x0, y0, z0 = gx, gy, oz
         else:
-            x0, y0, z0 = gx[ray, None], gy[ray, None], oz[ray, None]
-        fx = x0 + gdx[ray, None] * t
-        fy = y0 + gdy[ray, None] * t
-        dist = (z0 + dz[ray, None] * t) - _bilinear(surface, width, fx, fy, x_max, y_max, clamp)
+            x0, y0, z0 = gx.take(ray)[:, None], gy.take(ray)[:, None], oz.take(ray)[:, None]
+        fx = x0 + gdx.take(ray)[:, None] * t
+        fy = y0 + gdy.take(ray)[:, None] * t
+        dist = (z0 + dz.take(ray)[:, None] * t) - _bilinear(surface, width, fx, fy, x_max, y_max,
+                                                            clamp)
         below = dist <= 0
         first = below.argmax(axis=1)
-        rows = np.arange(len(ray))
-        has = below[rows, first]
+        first += np.arange(0, len(ray) * width_t, width_t)  # flat index of each row's first
+        has = below.take(first)
         if not np.count_nonzero(has):
             continue
-        rows, first = rows[has], first[has]
+        first = first[has]
         # rows are ordered by ray then segment: the first row of each ray is its nearest hit
-        hit_rays = ray[rows]
-        nearest = np.ones(len(rows), dtype=bool)
+        hit_rays = ray.take(first // width_t)
+        nearest = np.ones(len(first), dtype=bool)
         np.not_equal(hit_rays[1:], hit_rays[:-1], out=nearest[1:])
-        rows, first, hit_rays = rows[nearest], first[nearest], hit_rays[nearest]
-        t_hit = t[rows, first]
+        first, hit_rays = first[nearest], hit_rays[nearest]
+        t_hit = t.take(first)
         # the sample before the first one below is above (dist > 0): interpolate between
-        refine = first > 0
+        refine = first % width_t > 0
         if np.count_nonzero(refine):
-            r, p = rows[refine], first[refine] - 1
-            above = dist[r, p]
-            t_hit[refine] = t[r, p] + above / (above - dist[r, p + 1]) * step
+            p = first[refine] - 1
+            above = dist.take(p)
+            t_hit[refine] = t.take(p) + above / (above - dist.take(p + 1)) * step
         ranges[hit_rays] = np.where(t_hit <= max_range, t_hit, np.nan)
         found[hit_rays] = True
     return ranges
+
+
+@functools.lru_cache(maxsize=8)
+def _steps(n_seg: int, seg: float, block: int, res: float) -> tuple[FloatArray, FloatArray]:
+    """Where each segment starts along a ray and where its samples lie within it (m),
+    read-only: the same for every cast with one terrain, block and range."""
+    starts: FloatArray = seg * np.arange(n_seg, dtype=np.float64)
+    offsets: FloatArray = res * np.arange(block + 1, dtype=np.float64)
+    starts.flags.writeable = offsets.flags.writeable = False
+    return starts, offsets
 
 
 def _bilinear(flat: NDArray[np.float32], width: int, fx: FloatArray, fy: FloatArray,

@@ -30,6 +30,7 @@ geodetic coordinates (via ECEF), so the conversion error is only floating point.
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -102,7 +103,9 @@ def _ecef_to_geodetic(x: float, y: float, z: float) -> tuple[float, float, float
         s = math.sin(lat)
         n = WGS84_A / math.sqrt(1.0 - _E2 * s * s)
         h = p / math.cos(lat) - n
-        lat = math.atan2(z, p * (1.0 - _E2 * n / (n + h)))
+        previous, lat = lat, math.atan2(z, p * (1.0 - _E2 * n / (n + h)))
+        if lat == previous:  # a fixed point: the remaining rounds would change nothing
+            break
     s = math.sin(lat)
     n = WGS84_A / math.sqrt(1.0 - _E2 * s * s)
     h = p / math.cos(lat) - n
@@ -119,6 +122,15 @@ class Origin:
     latitude: float
     longitude: float
     elevation: float = 0.0
+
+    @functools.cached_property
+    def _enu_basis(self) -> tuple[tuple[float, float, float], tuple[float, float, float],
+                                  tuple[float, float, float]]:
+        return self._basis()
+
+    @functools.cached_property
+    def _ecef(self) -> tuple[float, float, float]:
+        return self.ecef()
 
     def _basis(self) -> tuple[tuple[float, float, float], tuple[float, float, float],
                               tuple[float, float, float]]:
@@ -138,9 +150,9 @@ class Origin:
         """(east, north, up) in metres of a WGS84 point; ``height`` defaults to the origin's."""
         h = self.elevation if height is None else height
         x, y, z = _geodetic_to_ecef(latitude, longitude, h)
-        x0, y0, z0 = self.ecef()
+        x0, y0, z0 = self._ecef
         d = (x - x0, y - y0, z - z0)
-        e, n, u = self._basis()
+        e, n, u = self._enu_basis
         return (sum(a * b for a, b in zip(e, d, strict=True)),
                 sum(a * b for a, b in zip(n, d, strict=True)),
                 sum(a * b for a, b in zip(u, d, strict=True)))
@@ -148,8 +160,8 @@ class Origin:
     def enu_to_geodetic(self, east: float, north: float,
                         up: float = 0.0) -> tuple[float, float, float]:
         """(latitude, longitude, ellipsoid height) of a point given in the local ENU frame."""
-        e, n, u = self._basis()
-        x0, y0, z0 = self.ecef()
+        e, n, u = self._enu_basis
+        x0, y0, z0 = self._ecef
         x = x0 + east * e[0] + north * n[0] + up * u[0]
         y = y0 + east * e[1] + north * n[1] + up * u[1]
         z = z0 + east * e[2] + north * n[2] + up * u[2]
@@ -166,6 +178,8 @@ class Origin:
         up = 0.0
         for _ in range(4):  # the tangent plane leaves the ellipsoid by d^2 / 2R
             lat, lon, h = self.enu_to_geodetic(east, north, up)
+            if h == self.elevation:  # on the ellipsoid: further rounds change nothing
+                break
             up -= h - self.elevation
         return lat, lon
 

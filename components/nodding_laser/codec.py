@@ -31,7 +31,6 @@ import binascii
 import functools
 import math
 import struct
-import sys
 from dataclasses import dataclass
 from enum import IntEnum, StrEnum
 from typing import TypeAlias
@@ -329,7 +328,9 @@ class MeasuredValues:
 
     def ranges_and_valid(self) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
         """:meth:`ranges_array` and :meth:`valid_mask` from one conversion of ``raw``."""
-        counts = np.array(self.raw, dtype=np.uint32)
+        # through array.array: a third of the cost of np.array on a tuple of ints (the
+        # same OverflowError for a word that is negative or beyond 32 bits)
+        counts = np.frombuffer(array.array("I", self.raw), dtype=np.uint32)
         counts &= (1 << self.range_bits) - 1
         valid = (counts > 0) & (counts < self.no_return_threshold)
         return (counts * self.unit.metres).astype(np.float32), valid
@@ -583,12 +584,9 @@ def encode_measured_values(values: MeasuredValues) -> bytes:
     word = (len(values.raw) | (values.partial_scan_index << 11)
             | (_UNIT_CODE[values.unit] << 14))
     try:
-        words = array.array("H", (word, *values.raw))
-    except OverflowError:
+        data = struct.pack(f"<{len(values.raw) + 1}H", word, *values.raw)
+    except struct.error:
         raise EOutOfBounds("measured value words are 16-bit") from None
-    if sys.byteorder == "big":  # pragma: no cover - the telegram is little-endian
-        words.byteswap()
-    data = words.tobytes()
     return encode_sick_telegram(REPLY_MEASURED_VALUES, data, address=values.address,
                                 status=values.status)
 

@@ -754,7 +754,13 @@ def interpolate_transform(pose0: ArrayLike, pose1: ArrayLike, s: float) -> Float
     angular rate about the fixed axis of ``R0ᵀ R1``, the shorter way round)."""
     a = np.asarray(pose0, dtype=np.float64)
     b = np.asarray(pose1, dtype=np.float64)
-    q0, q1 = _quaternion(a[:3, :3]), _quaternion(b[:3, :3])
+    return _interpolate(a, _quaternion(a[:3, :3]), b, _quaternion(b[:3, :3]), s)
+
+
+def _interpolate(a: FloatArray, q0: FloatArray, b: FloatArray, q1: FloatArray,
+                 s: float) -> FloatArray:
+    """:func:`interpolate_transform` of poses ``a`` and ``b`` whose rotations' unit
+    quaternions (:func:`_quaternion`) are ``q0`` and ``q1``."""
     dot = float(q0 @ q1)
     if dot < 0.0:  # q and -q are one rotation: take the shorter arc
         q1, dot = -q1, -dot
@@ -789,6 +795,9 @@ class PoseBuffer:
         self.audit = audit or PoseAudit()
         self._times: deque[float] = deque(maxlen=capacity)
         self._poses: deque[FloatArray] = deque(maxlen=capacity)
+        # each pose's rotation as a quaternion, computed once (a lookup interpolates
+        # between two stored poses; scans outnumber poses)
+        self._quaternions: deque[FloatArray] = deque(maxlen=capacity)
         self._plausible: deque[bool] = deque(maxlen=capacity)
         self.statistics: Counter[str] = Counter()
         self.last_audit: AuditResult | None = None
@@ -818,6 +827,7 @@ class PoseBuffer:
             ok = self.last_audit.ok
         self._times.append(time)
         self._poses.append(pose)
+        self._quaternions.append(_quaternion(pose[:3, :3]))
         self._plausible.append(ok)
         self.statistics["accepted" if ok else "implausible"] += 1
         return ok
@@ -845,7 +855,8 @@ class PoseBuffer:
         t0, t1 = times[k - 1], times[k]
         s = (time - t0) / (t1 - t0)
         return PoseLookup(PoseStatus.OK,
-                          interpolate_transform(self._poses[k - 1], self._poses[k], s))
+                          _interpolate(self._poses[k - 1], self._quaternions[k - 1],
+                                       self._poses[k], self._quaternions[k], s))
 
 
 # --- stereo / laser balance ------------------------------------------------------------

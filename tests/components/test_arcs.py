@@ -245,6 +245,38 @@ def test_arc_votes_check_ranges_and_convert_to_the_idl(arcs):
         ArcVotes.halt(n - 2).to_idl(time=TimeIDL(sec=0), behaviour="x", arcs=arcs)
 
 
+def test_votes_published_again_equal_a_validated_body(arcs):
+    """to_idl re-stamps the body it validated for the same votes, behaviour and arc set:
+    the result equals a fresh validated construction, field by field and in its
+    fingerprint (the run digest); another behaviour or arc set is validated anew."""
+    n = len(arcs)
+    votes = ArcVotes(np.arange(n) == 5, np.linspace(0, 1, n), np.full(n, 0.25),
+                     np.full(n, 2.0))
+    first = votes.to_idl(time=TimeIDL(sec=1, usec=2), behaviour="ObstacleDetection",
+                         arcs=arcs)
+    for stamp in (TimeIDL(sec=2, usec=999_999), TimeIDL(sec=-1, usec=0)):
+        again = votes.to_idl(time=stamp, behaviour="ObstacleDetection", arcs=arcs)
+        validated = ArcVoteIDL(time=stamp, behaviour="ObstacleDetection",
+                               curvatures=arcs.curvatures, veto=votes.veto, vote=votes.vote,
+                               certainty=votes.certainty, maxSpeed=votes.max_speed)
+        assert again == validated and again.fingerprint() == validated.fingerprint()
+        assert again.to_json() == validated.to_json()
+        assert again.model_fields_set == validated.model_fields_set
+        assert all(not getattr(again, name).flags.writeable
+                   for name in ("curvatures", "veto", "vote", "certainty", "maxSpeed"))
+    assert first.time == TimeIDL(sec=1, usec=2)  # the earlier body is not changed
+    other = votes.to_idl(time=TimeIDL(sec=3), behaviour="PurePursuit", arcs=arcs)
+    assert other.behaviour == "PurePursuit"
+    with pytest.raises(ArcSetMismatchError):
+        votes.to_idl(time=TimeIDL(sec=3), behaviour="PurePursuit",
+                     arcs=ArcSet.from_parameters(ArcSetParameters(Count=n + 2)))
+    # an unchecked producer's bad votes still fail validation, the first time and later
+    bad = ArcVotes.unchecked(np.zeros(n, bool), np.full(n, 1.5), np.ones(n), np.ones(n))
+    for _ in range(2):
+        with pytest.raises(ValueError):
+            bad.to_idl(time=TimeIDL(sec=0), behaviour="x", arcs=arcs)
+
+
 def test_a_halt_vetoes_every_arc(arcs):
     halt = ArcVotes.halt(len(arcs))
     assert halt.all_vetoed and not np.any(halt.max_speed)
