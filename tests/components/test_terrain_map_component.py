@@ -487,3 +487,20 @@ async def test_scans_no_pose_comes_for_are_dropped_not_hoarded():
     assert stats["future_dropped"] == 20
     assert "no pose came for" in health.detail
     assert PENDING_LIMIT < 1.0
+
+
+async def test_a_scan_waiting_for_its_pose_is_fused_whatever_the_frame_spelling():
+    """The seed prints frames as ``Body: Frame``; a scan so named that arrives before
+    the pose after it is placed when that pose comes (it once fell through the retry)."""
+    async with rig() as r:
+        await r.drive(1, world=None)
+        t = r.clock.now() + DT
+        r.system.channel.publish("Raptor", "Laser11", Range3dSeqEventIDL(
+            time=TimeIDL.from_seconds(t), sensorId=11,
+            frame="FrontNoddingSICKLeft: AxleCenterFreeEnd", points=r.laser_points(PATCH)))
+        await r.clock.sleep(DT)
+        waiting = r.stats()["pending_scans"]
+        await r.drive(3, world=None)
+        stats = r.stats()
+    assert waiting == 1
+    assert stats["scans"] == 1 and stats["points_fused"] == len(PATCH)
