@@ -29,7 +29,11 @@ identity, as a map event's ``mapPose``):
 - **RMS height error**: over observed terrain cells (count > 0) holding truth samples,
   ``elevation - mean(truth surface samples in the cell)``; ``…_ground`` restricts it to
   cells clear of obstacles by the margin (faces make cell means depend on where the
-  beams happened to land).
+  beams happened to land). ``height_offset`` is the mean error over those ground
+  cells: the level at which the whole map sits above the truth (a map stitched with
+  a vehicle height from GPS floats by decimetres; hazards, which are height
+  differences, do not see it), and ``rms_height_error_centred`` the RMS over all
+  observed cells of the error less that offset: the error in the map's shape.
 
 Fractions are NaN when their denominator is 0.
 """
@@ -94,6 +98,8 @@ class MapQuality:
     observed_terrain_cells: int
     rms_height_error: float
     rms_height_error_ground: float
+    height_offset: float
+    rms_height_error_centred: float
     obstacle_cells: int
     detected_cells: int
     detection_fraction: float
@@ -194,7 +200,7 @@ def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTru
     false = int(np.count_nonzero(free & hazardous))
     n_free = int(np.count_nonzero(free))
 
-    rms = rms_ground = math.nan
+    rms = rms_ground = offset = rms_centred = math.nan
     n_observed = 0
     if terrain_elevation is not None and terrain_count is not None \
             and terrain_geometry is not None:
@@ -216,10 +222,13 @@ def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTru
         error_ground = elevation[ground] - tsum[ground] / tsamples[ground]
         if len(error_ground):
             rms_ground = float(np.sqrt(np.mean(error_ground ** 2)))
+            offset = float(np.mean(error_ground))
+            rms_centred = float(np.sqrt(np.mean((error - offset) ** 2)))
 
     return MapQuality(
         observed_terrain_cells=n_observed, rms_height_error=rms,
-        rms_height_error_ground=rms_ground, obstacle_cells=len(targets),
+        rms_height_error_ground=rms_ground, height_offset=offset,
+        rms_height_error_centred=rms_centred, obstacle_cells=len(targets),
         detected_cells=detected, detection_fraction=_fraction(detected, len(targets)),
         free_observed_cells=n_free, false_hazard_cells=false,
         false_hazard_fraction=_fraction(false, n_free))
