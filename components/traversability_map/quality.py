@@ -21,6 +21,9 @@ identity, as a map event's ``mapPose``):
 - **Obstacle cells**: coverage ≥ ``obstacle_coverage`` (0.5: cells mostly obstacle)
   and centre within ``detection_range`` (8 m, the laser's reach) of some point of
   the track. **Detected**: hazard ≥ ``hazard_threshold`` (1: untraversable).
+  **Unobserved**: obstacle cells the map holds nothing for (NaN): within reach of the
+  track but never in the sensors' view (behind the start, in another obstacle's
+  shadow); ``detection_fraction_observed`` leaves them out.
 - **Free observed cells**: observed (``observed``, default: hazard not NaN) and no
   obstacle sample in the cell or within ``margin_cells`` cells of it. The margin is a
   don't-care band: the step rule marks both sides of a face, so the ground cell
@@ -103,6 +106,8 @@ class MapQuality:
     obstacle_cells: int
     detected_cells: int
     detection_fraction: float
+    unobserved_obstacle_cells: int
+    detection_fraction_observed: float
     free_observed_cells: int
     false_hazard_cells: int
     false_hazard_fraction: float
@@ -196,6 +201,7 @@ def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTru
     with np.errstate(invalid="ignore"):
         hazardous = h >= hazard_threshold
     detected = int(np.count_nonzero(hazardous[targets[:, 0], targets[:, 1]]))
+    unobserved = int(np.count_nonzero(~seen[targets[:, 0], targets[:, 1]]))
     free = seen & (samples > 0) & _clear_of_obstacles(obstacle, margin_cells)
     false = int(np.count_nonzero(free & hazardous))
     n_free = int(np.count_nonzero(free))
@@ -230,5 +236,7 @@ def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTru
         rms_height_error_ground=rms_ground, height_offset=offset,
         rms_height_error_centred=rms_centred, obstacle_cells=len(targets),
         detected_cells=detected, detection_fraction=_fraction(detected, len(targets)),
+        unobserved_obstacle_cells=unobserved,
+        detection_fraction_observed=_fraction(detected, len(targets) - unobserved),
         free_observed_cells=n_free, false_hazard_cells=false,
         false_hazard_fraction=_fraction(false, n_free))

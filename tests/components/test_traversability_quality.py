@@ -32,6 +32,7 @@ def test_detection_and_false_hazards() -> None:
     q = assess(hazard=hazard_with({(2, 2): 1.0, (1, 2): 1.0, (6, 6): 1.0}),
                hazard_geometry=TRAV, truth=TRUTH, track=[[0.0, 0.0]])
     assert (q.obstacle_cells, q.detected_cells, q.detection_fraction) == (1, 1, 1.0)
+    assert (q.unobserved_obstacle_cells, q.detection_fraction_observed) == (0, 1.0)
     assert q.free_observed_cells == 64 - 9
     assert q.false_hazard_cells == 1  # [6, 6]; [1, 2] lies in the margin
     assert q.false_hazard_fraction == pytest.approx(1 / 55)
@@ -42,6 +43,7 @@ def test_unknown_is_neither_detected_nor_free_and_range_limits_targets() -> None
     h = hazard_with({(2, 2): np.nan, (5, 5): np.nan})
     q = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[1.0, 1.0]])
     assert (q.obstacle_cells, q.detected_cells) == (1, 0)
+    assert q.unobserved_obstacle_cells == 1 and math.isnan(q.detection_fraction_observed)
     assert q.free_observed_cells == 64 - 9 - 1
     far = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[20.0, 20.0]])
     assert far.obstacle_cells == 0 and math.isnan(far.detection_fraction)
