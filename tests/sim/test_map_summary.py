@@ -183,3 +183,14 @@ def test_a_terrain_map_off_by_a_height_moves_the_offset_not_the_shape(run):
     assert raised["rms_height_error_centred_m"] == pytest.approx(
         before["rms_height_error_centred_m"], abs=1e-3)
     assert raised["rms_height_error_m"] > before["rms_height_error_m"] + 0.3
+
+
+def test_the_cli_prints_the_maps_in_one_line(run):
+    from afa.cli import _maps_line
+
+    _, summary = run
+    line = _maps_line(summary["maps"])
+    hazards = summary["maps"]["hazards"]
+    assert line.startswith("maps: terrain RMS height error ")
+    assert (f"detected {hazards['detected_cells']}/{hazards['obstacle_cells']}" in line)
+    assert _maps_line({"terrain": None, "hazards": None}) == "maps: none built"
