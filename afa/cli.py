@@ -504,6 +504,11 @@ def _maps_line(maps: dict[str, Any]) -> str:
     """The summary's ``maps`` section in one line."""
     parts = []
     terrain, hazards = maps.get("terrain"), maps.get("hazards")
+    for name, part in (("terrain", terrain), ("hazards", hazards)):
+        if part and "error" in part:
+            parts.append(f"{name}: {part['error']}")
+    terrain = None if terrain is None or "error" in terrain else terrain
+    hazards = None if hazards is None or "error" in hazards else hazards
     if terrain:
         parts.append(f"terrain RMS height error {terrain['rms_height_error_m']} m "
                      f"({terrain['rms_height_error_centred_m']} m about its offset of "

@@ -23,7 +23,8 @@ the map holds nothing for, never in the sensors' view; false hazards: hazard 1 o
 observed cell with no obstacle sample within one cell). The terrain figures are of the
 Terrain Map's latest map (32 m around where the vehicle stopped); the hazard figures of
 the Global Map's cumulative map (the whole run), or without one of the Traversability
-Map's latest map. A map that does not exist or never published is ``null``.
+Map's latest map. A map that does not exist or never published is ``null``; one that
+cannot be scored (its track lies off the world's terrain) holds an ``error``.
 
 Frames. The maps are in the pose frame: metres east, north and up of ``initialUTM`` (the
 first GPS fix) along the UTM grid. The simulator's truth is in the tangent plane at the
@@ -183,9 +184,13 @@ def map_summary(system: Any, simulation: Any) -> dict[str, Any]:
             xs, ys, path = region(frame)
             geometry = GridGeometry(terrain_map.originX, terrain_map.originY,
                                     terrain_map.gridsize, terrain_map.rows, terrain_map.cols)
+            try:
+                truth = truth_in_map_frame(simulation.terrain, frame, xs, ys)
+            except ValueError as exc:  # the track lies off the world's terrain
+                summary["terrain"] = {"map": component.name, "error": str(exc)}
+                break
             quality = assess(hazard=empty, hazard_geometry=GridGeometry(0, 0, 1, 1, 1),
-                             truth=truth_in_map_frame(simulation.terrain, frame, xs, ys),
-                             track=path, terrain_elevation=terrain_map.elevation,
+                             truth=truth, track=path, terrain_elevation=terrain_map.elevation,
                              terrain_count=terrain_map.pointCount, terrain_geometry=geometry)
             summary["terrain"] = {"map": component.name, **_figures(quality, terrain=True)}
             break
@@ -209,8 +214,12 @@ def map_summary(system: Any, simulation: Any) -> dict[str, Any]:
         name, layer, geometry, initial_utm = hazard
         frame = MapFrame.of(origin, initial_utm)
         xs, ys, path = region(frame)
-        quality = assess(hazard=layer, hazard_geometry=geometry,
-                         truth=truth_in_map_frame(simulation.terrain, frame, xs, ys),
-                         track=path, detection_range=DETECTION_RANGE)
-        summary["hazards"] = {"map": name, **_figures(quality, terrain=False)}
+        try:
+            truth = truth_in_map_frame(simulation.terrain, frame, xs, ys)
+        except ValueError as exc:
+            summary["hazards"] = {"map": name, "error": str(exc)}
+        else:
+            quality = assess(hazard=layer, hazard_geometry=geometry, truth=truth, track=path,
+                             detection_range=DETECTION_RANGE)
+            summary["hazards"] = {"map": name, **_figures(quality, terrain=False)}
     return summary

@@ -79,6 +79,8 @@ def test_truth_is_resampled_into_the_map_frame():
         assert (world_e.min(), world_e.max()) == pytest.approx((e0, e1), abs=0.11)
         assert (world_n.min(), world_n.max()) == pytest.approx((n0, n1), abs=0.11)
     assert surface[box].mean() == pytest.approx(0.8 - 0.5, abs=0.05)
+    with pytest.raises(ValueError, match="does not overlap"):
+        truth_in_map_frame(terrain, frame, (500.0, 600.0), (-10.0, 10.0))
     assert surface[ditch].mean() == pytest.approx(-0.8 - 0.5, abs=0.05)
     assert len(surface) == truth.surface.size == 451 * 201
 
@@ -194,3 +196,11 @@ def test_the_cli_prints_the_maps_in_one_line(run):
     assert line.startswith("maps: terrain RMS height error ")
     assert (f"detected {hazards['detected_cells']}/{hazards['obstacle_cells']}" in line)
     assert _maps_line({"terrain": None, "hazards": None}) == "maps: none built"
+
+
+def test_a_map_that_cannot_be_scored_says_why():
+    from afa.cli import _maps_line
+
+    line = _maps_line({"terrain": {"map": "TerrainService", "error": "off the terrain"},
+                       "hazards": None})
+    assert line == "maps: terrain: off the terrain"
