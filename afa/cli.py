@@ -454,14 +454,11 @@ async def _until_stopped(system: Any, stop: asyncio.Event, duration: float | Non
     from afa.tasks import Scope
 
     async with Scope() as scope:
-        runner = scope.spawn(system.run(duration), "afa-run")
+        runner = scope.spawn(system.run(duration, until=finished), "afa-run")
         signalled = scope.spawn(stop.wait(), "afa-signal")
         reporter = scope.spawn(progress, "afa-progress")
-        waiting = [runner, signalled]
-        if finished is not None:
-            waiting.append(scope.spawn(finished.wait(), "afa-finished"))
-        done, _ = await asyncio.wait(waiting, return_when=asyncio.FIRST_COMPLETED)
-        for task in (*waiting, reporter):
+        done, _ = await asyncio.wait([runner, signalled], return_when=asyncio.FIRST_COMPLETED)
+        for task in (runner, signalled, reporter):
             task.cancel()
         for task in done:
             task.result()

@@ -8,6 +8,25 @@ literals; and an async driver (:mod:`afa.reactor`) that moves bytes between a
 :class:`StreamDecoder` owns the buffering, resynchronisation and statistics; a concrete
 decoder implements one hook, :meth:`StreamDecoder.scan`, which looks at the front of the
 buffer and says what is there.
+
+Cost. Decoding must stay linear in the bytes fed, whatever they are (line noise, a
+hostile or broken device), because every read runs on the event loop. The contract that
+keeps it so:
+
+- ``feed`` calls ``scan`` at most once per byte consumed plus once per read;
+- a scan that waits (``Scan.need_more``) for the end of a delimited frame says how far it
+  searched (``searched=``) and resumes there on the next read (:attr:`StreamDecoder.
+  searched`), so a frame arriving byte by byte is searched once, not once per read;
+- a skip after a bad frame goes only to the next possible frame start, and finding that
+  start costs no more than the bytes it skips;
+- a frame may not contain the start of another frame of its own kind where the protocol
+  can tell (each decoder documents how), so false frame starts cannot nest and each byte
+  is checked against a bounded number of candidate frames.
+
+Consuming a frame deletes it from the front of a ``bytearray``; CPython does that in
+amortised O(1) time (it moves the array's start, bpo-19087), so ``feed`` is not
+quadratic in a large buffer even when it skips byte by byte. ``tests/components/
+test_decoder_hardening.py`` counts the work of every decoder on hostile streams.
 """
 
 from __future__ import annotations
@@ -33,7 +52,10 @@ class Fault(StrEnum):
 class Scan(Generic[M]):
     """The result of looking at the front of the buffer.
 
-    - ``Scan.need_more()``: the front may be the start of a frame; wait for more bytes.
+    - ``Scan.need_more(searched=k)``: the front may be the start of a frame; wait for more
+      bytes. ``k`` (optional) is how far the scan searched for the frame's end without
+      finding it: the next scan of the same front may resume there (see
+      :attr:`StreamDecoder.searched`).
     - ``Scan.frame(n, message)``: the first ``n`` bytes are one valid frame.
     - ``Scan.skip(n, fault)``: drop the first ``n`` bytes (n >= 1) and count the fault.
       To resynchronise after a bad frame, skip only up to the next possible sync byte
@@ -43,10 +65,11 @@ class Scan(Generic[M]):
     consumed: int
     message: M | None = None
     fault: Fault | None = None
+    searched: int = 0
 
     @staticmethod
-    def need_more() -> Scan[M]:
-        return Scan(0)
+    def need_more(searched: int = 0) -> Scan[M]:
+        return Scan(0, searched=searched)
 
     @staticmethod
     def frame(consumed: int, message: M) -> Scan[M]:
@@ -83,6 +106,8 @@ class StreamDecoder(ABC, Generic[M]):
         self._buffer = bytearray()
         self._max_buffer = max_buffer
         self._skipping = False
+        self._searched = 0
+        self._front = 0  # stream offset of the first buffered byte
         self.stats = DecoderStatistics()
 
     @abstractmethod
@@ -98,8 +123,11 @@ class StreamDecoder(ABC, Generic[M]):
         while buffer:
             result = self.scan(buffer)
             if result.consumed == 0:
+                self._searched = min(result.searched, len(buffer))
                 break
-            del buffer[: result.consumed]
+            del buffer[: result.consumed]  # amortised O(1): see the module docstring
+            self._front += result.consumed
+            self._searched = 0
             if result.fault is None:
                 self._skipping = False
                 self.stats.frames += 1
@@ -109,6 +137,8 @@ class StreamDecoder(ABC, Generic[M]):
         if len(buffer) > self._max_buffer:
             excess = len(buffer) - self._max_buffer
             del buffer[:excess]
+            self._front += excess
+            self._searched = 0
             self._count_fault(Fault.OVERFLOW, excess)
         return messages
 
@@ -127,7 +157,27 @@ class StreamDecoder(ABC, Generic[M]):
         """Bytes held waiting for the rest of a frame."""
         return len(self._buffer)
 
+    @property
+    def searched(self) -> int:
+        """Where the last scan of the current front stopped searching for the frame's end
+        (the ``searched`` of its ``Scan.need_more``), an index into the buffer; 0 when
+        the front is new (bytes were consumed since) or the scan gave no resume point.
+
+        A scan that searches for a delimiter starts at ``max(its own start, searched)``,
+        so bytes already searched are not searched again on every read.
+        """
+        return self._searched
+
+    @property
+    def front_position(self) -> int:
+        """Stream offset of the first buffered byte: every byte fed before it has been
+        consumed, skipped or dropped. Lets a decoder recognise a front it has seen."""
+        return self._front
+
     def reset(self) -> None:
-        """Forget buffered bytes (after a reconnect); statistics are kept."""
+        """Forget buffered bytes (after a reconnect); statistics are kept. A decoder that
+        keeps state about the stream overrides this and calls ``super().reset()``."""
+        self._front += len(self._buffer)
         self._buffer.clear()
         self._skipping = False
+        self._searched = 0

@@ -9,14 +9,19 @@ ground truth from the simulated world. The driver cannot tell.
 ``device.factory()`` is what ``System(devices={name: ...})`` takes: each open makes a
 fresh pipe, serves the device end in a task the fake owns, and returns the host end.
 ``unplug()`` / ``plug()`` simulate a lost and returning device.
+
+A fake may run for hours in the simulator, so what it keeps is bounded: the commands it
+received are a :class:`RecentLog` (the latest :attr:`FakeDevice.command_history`, and a
+count of all), and a connection is forgotten when it ends.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Awaitable, Callable
-from typing import Generic, TypeVar
+from collections import deque
+from collections.abc import Awaitable, Callable, Iterator, Sequence
+from typing import Generic, TypeVar, overload
 
 from afa.clock import Clock
 from afa.codec import StreamDecoder
@@ -24,10 +29,57 @@ from afa.errors import EDevIO
 from afa.tasks import Scope, first_error, spawn
 from afa.transport import ByteStream, DeviceSpec, MemoryByteStream, memory_pipe
 
-__all__ = ["FakeDevice"]
+__all__ = ["FakeDevice", "RecentLog"]
 
 C = TypeVar("C")
+T = TypeVar("T")
 log = logging.getLogger("afa.fake")
+
+
+class RecentLog(Sequence[T]):
+    """The latest ``maxlen`` items of an endless stream, oldest first; :attr:`total`
+    counts every item ever appended. Indexes and slices like a list (a slice is a new
+    list), so a test reads ``fake.commands[:4]`` or ``fake.commands[-1]`` as before,
+    while a long run holds at most ``maxlen`` items.
+    """
+
+    def __init__(self, maxlen: int) -> None:
+        if maxlen < 1:
+            raise ValueError("maxlen must be >= 1")
+        self._items: deque[T] = deque(maxlen=maxlen)
+        self.total = 0
+
+    @property
+    def maxlen(self) -> int:
+        return self._items.maxlen or 0
+
+    def append(self, item: T) -> None:
+        self._items.append(item)
+        self.total += 1
+
+    def clear(self) -> None:
+        """Forget the items; :attr:`total` is kept."""
+        self._items.clear()
+
+    @overload
+    def __getitem__(self, index: int) -> T: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[T]: ...
+
+    def __getitem__(self, index: int | slice) -> T | list[T]:
+        if isinstance(index, slice):
+            return list(self._items)[index]
+        return self._items[index]
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __iter__(self) -> Iterator[T]:
+        return iter(self._items)
+
+    def __repr__(self) -> str:
+        return f"RecentLog({list(self._items)!r}, total={self.total})"
 
 
 class FakeDevice(Generic[C]):
@@ -35,10 +87,13 @@ class FakeDevice(Generic[C]):
     :meth:`produce` (any of them may stay empty)."""
 
     name = "device"
+    #: How many of the latest decoded commands :attr:`commands` keeps.
+    command_history = 1024
 
     def __init__(self, clock: Clock) -> None:
         self.clock = clock
-        self.commands: list[C] = []
+        #: The latest decoded host commands (``commands.total``: all of them).
+        self.commands: RecentLog[C] = RecentLog(self.command_history)
         self.plugged = True
         self.opens = 0
         self._streams: list[MemoryByteStream] = []
@@ -79,6 +134,8 @@ class FakeDevice(Generic[C]):
             if not isinstance(error, EDevIO):
                 raise error from None
         finally:
+            if stream in self._streams:
+                self._streams.remove(stream)  # a long run reconnects many times
             await stream.close()
 
     def factory(self) -> Callable[[DeviceSpec], Awaitable[ByteStream]]:

@@ -257,12 +257,17 @@ class System:
         if raise_failures:
             self._raise_failures()
 
-    async def run(self, duration: float | None = None) -> None:
-        """Run until ``duration`` clock seconds have passed (None: until stopped).
-        Raises TaskFailed as soon as a task of the system (not of a component) fails."""
+    async def run(self, duration: float | None = None, *,
+                  until: asyncio.Event | None = None) -> None:
+        """Run until ``duration`` clock seconds have passed (None: until stopped), or
+        ``until`` is set (a simulated mission finished, say). Raises TaskFailed as soon as
+        a task of the system (not of a component) fails."""
         self._raise_failures()
         waiter = self._stopped.wait() if duration is None else self.clock.sleep(duration)
-        await _first_of(waiter, self._failed.wait())
+        waiters = [waiter, self._failed.wait()]
+        if until is not None:
+            waiters.append(until.wait())
+        await _first_of(*waiters)
         self._raise_failures()
 
     def _raise_failures(self) -> None:

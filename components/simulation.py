@@ -39,6 +39,7 @@ from afa import ByteStream, Clock, EDevIO, Event, SerialSpec, System, TcpSpec, r
 from afa.component import Component
 from afa.ports import Direction, interface_name
 from afa.sim.oracle import HazardField, shortest_course
+from afa.sim.stats import RunningError
 from afa.sim.terrain import Terrain
 from afa.sim.vehicle import Vehicle, VehicleState
 from afa.sim.world import World, load_world
@@ -47,8 +48,10 @@ from afa.transport import AsyncioByteStream, DeviceFactory, PtyDeviceStream, ope
 from components.gps_sokkia.codec import latlon_to_utm
 from components.map_quality import map_summary
 from components.model_server.geometry import GeometryModel
+from components.waypoints import to_local
 from idl import (
     ArcVoteIDL,
+    PlanningBoundaryIDL,
     PoseTransformIDL,
     VelocityDataIDL,
     VelocityIDL,
@@ -68,6 +71,8 @@ DEFAULT_WORLD = CONFIGS / "worlds" / "open-field.xml"
 VEHICLE_FRAME = "Raptor:RearAxleCenter"
 #: A waypoint counts as reached when the rear axle passes within this distance (m).
 WAYPOINT_TOLERANCE = 3.0
+#: The mission area given to the Global Map: the terrain less this margin (m).
+GEOFENCE_MARGIN = 1.0
 #: Physics step (s): 50 Hz, finer than every sensor but the laser's scan lines, which
 #: are ray-cast at their own times from the latest state.
 PHYSICS_STEP = 0.02
@@ -233,7 +238,7 @@ class RaptorSimulation:
         self.waypoints_reached = 0
         self._next_waypoint = 0
         self._digest = hashlib.sha256()
-        self._pose_errors: list[tuple[float, float]] = []
+        self._pose_errors = RunningError()  # constant memory however long the run
         self.fakes: list[Any] = []
         self.endpoints: dict[str, str] = {}  # component -> pty path or host:port
         self._shared: dict[str, Any] = {}
@@ -361,6 +366,12 @@ class RaptorSimulation:
             elif key.startswith("pty:"):
                 await endpoint.close()
 
+    async def run_mission(self) -> bool:
+        """Run the attached system until the mission (or the drive script) is finished
+        or its :attr:`time_limit` has passed; True if finished. Inside ``async with``."""
+        await self.system.run(self.time_limit, until=self.finished)
+        return self.finished.is_set()
+
     @property
     def time_limit(self) -> float | None:
         """Seconds the mission may take: the world's ``time-limit``, else 120 s plus 8 s
@@ -450,8 +461,10 @@ class RaptorSimulation:
         await plan.setWaypointList(group)
         await plan.setPatrolMode(mission.patrol)
         global_name = served_name(system, GlobalMapInterface)
+        global_map = None
         if global_name is not None:
-            await (await system.resolve(GlobalMapInterface, global_name)).setWaypointList(group)
+            global_map = await system.resolve(GlobalMapInterface, global_name)
+            await global_map.setWaypointList(group)
         control = await system.resolve(VehicleControlInterface, control_name)
         while True:  # the controller link comes up a moment after the component
             try:
@@ -463,6 +476,35 @@ class RaptorSimulation:
                 await self.clock.sleep(0.5)
         log.info("mission started: %d waypoints%s", len(mission.waypoints),
                  " (patrol)" if mission.patrol else "")
+        if global_map is not None:
+            await self._geofence(global_map)
+
+    async def _geofence(self, global_map: Any) -> None:
+        """The operator's mission area: the world's terrain (there is nothing beyond
+        it), less ``GEOFENCE_MARGIN``, as the Global Map's planning boundary, once the
+        map knows its world frame (``initialUTM``, from the first merged map)."""
+        while True:
+            transform = await global_map.getTransformToPlanningFromWorld()
+            if np.any(transform.initialUTM):
+                break
+            await self.clock.sleep(0.5)
+        planning = np.asarray(transform.HTransform)
+        e0, e1, n0, n1 = self.terrain.extent
+        m = GEOFENCE_MARGIN
+        corners = {}
+        for key, (east, north) in {"sw": (e0 + m, n0 + m), "se": (e1 - m, n0 + m),
+                                   "nw": (e0 + m, n1 - m), "ne": (e1 - m, n1 - m)}.items():
+            lat, lon = self.world.origin.to_geodetic(east, north)
+            x, y = to_local(WaypointIDL(latitude=lat, longitude=lon), transform.initialUTM)
+            corners[key] = planning @ np.array([x, y, 0.0, 1.0])
+        # the largest grid-aligned box inside the (slightly rotated) UTM quadrilateral
+        boundary = PlanningBoundaryIDL(
+            minX=math.ceil(max(corners["sw"][0], corners["nw"][0])),
+            maxX=math.floor(min(corners["se"][0], corners["ne"][0])) - 1,
+            minY=math.ceil(max(corners["sw"][1], corners["se"][1])),
+            maxY=math.floor(min(corners["nw"][1], corners["ne"][1])) - 1)
+        if not await global_map.setPlanningBoundary(boundary):
+            log.warning("the mission area %s lies outside the Global Map", boundary)
 
     async def _drive_script(self) -> None:
         """Tele-operation: the world's timed commands, sent as a joystick would."""
@@ -534,21 +576,13 @@ class RaptorSimulation:
         east = pose.HTransform[0, 3] + pose.initialUTM[0]
         north = pose.HTransform[1, 3] + pose.initialUTM[1]
         yaw = math.atan2(pose.HTransform[1, 0], pose.HTransform[0, 0])
-        self._pose_errors.append((math.hypot(east - utm.easting_m, north - utm.northing_m),
-                                  math.degrees(math.remainder(yaw - grid_yaw, 2 * math.pi))))
+        self._pose_errors.add(self.sim_time,
+                              math.hypot(east - utm.easting_m, north - utm.northing_m),
+                              math.degrees(math.remainder(yaw - grid_yaw, 2 * math.pi)))
 
     def summary(self) -> dict[str, Any]:
         """The simulation's part of the run summary."""
-        errors = np.array(self._pose_errors) if self._pose_errors else None
-        pose_error: dict[str, Any] | None = None
-        if errors is not None:
-            settled = errors[len(errors) // 10:]  # after the filter's first seconds
-            pose_error = {
-                "samples": int(len(errors)),
-                "rms_position_m": round(float(np.sqrt(np.mean(settled[:, 0] ** 2))), 4),
-                "max_position_m": round(float(np.max(settled[:, 0])), 4),
-                "rms_heading_deg": round(float(np.sqrt(np.mean(settled[:, 1] ** 2))), 4),
-            }
+        pose_error = self._pose_errors.summary()  # after the filter's first seconds
         mission_minutes = (self.mission_complete_time or self.sim_time) / 60.0
         return {
             "world": self.world.name,

@@ -18,11 +18,15 @@ A field is ``<parameter name="F" value="v"/>`` (scalar), ``<parameter name="F">`
 named children (struct) or with unnamed children (vector of scalars or structs).
 
 The parser is hardened: no DTD loading, no entity resolution, no network, no internal
-DTD subset (so no entity-expansion attack), and a size limit.
+DTD subset (so no entity-expansion attack), a size limit that holds for any kind of file
+(at most limit + 1 bytes are read, from a pipe or ``/dev/zero`` too) and, for the
+configuration, a limit on the number of elements, which bounds the validation work.
 """
 
 from __future__ import annotations
 
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,10 +36,13 @@ from lxml import etree
 from afa.errors import ConfigError
 
 __all__ = ["read_document", "MiroDocument", "Section", "ParameterSet", "MAX_FILE_BYTES",
-           "read_bounded", "parse_xml"]
+           "MAX_ELEMENTS", "read_bounded", "parse_xml"]
 
 #: Configuration files larger than this are refused (the Raptor's is ~20 kB).
 MAX_FILE_BYTES = 4 * 1024 * 1024
+#: Elements in a configuration file, at most (the Raptor's has 400). Each may cost a
+#: validation error with a spelling suggestion (~0.2 ms), so this bounds the work.
+MAX_ELEMENTS = 10_000
 
 Path_ = tuple[str | int, ...]
 
@@ -74,13 +81,22 @@ class MiroDocument:
 
 
 def read_bounded(path: Path, limit: int) -> bytes:
-    """The bytes of ``path``. Raises :class:`~afa.errors.ConfigError` (``path:1``) if the
-    file is larger than ``limit`` bytes; an :class:`OSError` is left to the caller, who
-    knows what kind of file could not be read."""
-    size = path.stat().st_size
-    if size > limit:
-        raise ConfigError(f"{path}:1: file is {size} bytes; the limit is {limit}")
-    return path.read_bytes()
+    """The bytes of ``path``, reading at most ``limit`` + 1 of them whatever the file is: a
+    regular file, a pipe or FIFO (``--world <(generate)``), a device (``/dev/zero``). A
+    FIFO blocks until a writer opens it, as with any reader.
+
+    Raises :class:`~afa.errors.ConfigError` (``path:1``) if the file holds more than
+    ``limit`` bytes; an :class:`OSError` is left to the caller, who knows what kind of
+    file could not be read.
+    """
+    with open(path, "rb") as file:
+        data = file.read(limit + 1)
+        if len(data) > limit:
+            status = os.fstat(file.fileno())
+            size = (f"is {status.st_size} bytes" if stat.S_ISREG(status.st_mode)
+                    else f"holds more than {limit} bytes")
+            raise ConfigError(f"{path}:1: file {size}; the limit is {limit}")
+    return data
 
 
 def parse_xml(data: bytes, path: Path) -> etree._Element:
@@ -123,6 +139,10 @@ def read_document(path: str | Path) -> MiroDocument:
 def parse_document(data: bytes, path: Path) -> MiroDocument:
     """Parse configuration bytes (``path`` is used in messages)."""
     root = parse_xml(data, path)
+    for count, node in enumerate(root.iter(), start=1):
+        if count > MAX_ELEMENTS:
+            raise ConfigError(f"{path}:{node.sourceline or 1}: more than {MAX_ELEMENTS} "
+                              "elements (the limit; the Raptor's configuration has 400)")
     if root.tag != "config":
         raise ConfigError(f"{path}:{root.sourceline}: the root element must be <config>, "
                           f"not <{root.tag}>")

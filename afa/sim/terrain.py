@@ -26,7 +26,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from afa.sim.world import Obstacle, TerrainSpec
+from afa.sim.world import (
+    MAX_RASTER_CELLS,
+    MAX_TERRAIN_CELLS,
+    Obstacle,
+    TerrainSpec,
+    raster_cells,
+    raster_window,
+    terrain_cells,
+)
 
 __all__ = ["Terrain", "ROUGHNESS_MODES", "ROUGHNESS_WAVELENGTHS", "BLOCK_PAD", "OFF_GRID_HEIGHT"]
 
@@ -71,7 +79,18 @@ class Terrain:
     # ------------------------------------------------------------------ building
     @classmethod
     def from_spec(cls, spec: TerrainSpec, obstacles: Sequence[Obstacle] = ()) -> Terrain:
-        """Build the heightfield: slope + roughness, then each obstacle in order."""
+        """Build the heightfield: slope + roughness, then each obstacle in order.
+
+        Raises ValueError beyond the limits a world file is held to (``afa.sim.world``:
+        grid samples, obstacles, rasterised samples), which bound the time and memory of
+        a build to seconds and about half a gigabyte.
+        """
+        if not terrain_cells(spec) <= MAX_TERRAIN_CELLS:
+            raise ValueError(f"a terrain grid of more than {MAX_TERRAIN_CELLS} samples")
+        if len(obstacles) > np.iinfo(np.int16).max:
+            raise ValueError(f"at most {np.iinfo(np.int16).max} obstacles")
+        if sum(raster_cells(o, spec) for o in obstacles) > MAX_RASTER_CELLS:
+            raise ValueError(f"obstacles covering more than {MAX_RASTER_CELLS} grid samples")
         res = spec.resolution
         nx = int(round(spec.width / res)) + 1
         ny = int(round(spec.depth / res)) + 1
@@ -83,10 +102,8 @@ class Terrain:
         ground32 = np.ascontiguousarray(ground, dtype=np.float32)
         surface = ground32.copy()
         ids = np.full(ground32.shape, -1, dtype=np.int16)
-        if len(obstacles) > np.iinfo(np.int16).max:
-            raise ValueError(f"at most {np.iinfo(np.int16).max} obstacles")
         for index, obstacle in enumerate(obstacles):
-            _rasterise(obstacle, index, east, north, ground32, surface, ids)
+            _rasterise(obstacle, index, spec, east, north, ground32, surface, ids)
         return cls(spec, ground32, surface, ids, obstacles)
 
     # ------------------------------------------------------------------ geometry
@@ -280,15 +297,11 @@ def _roughness(rms: float, seed: int, east: FloatArray, north: FloatArray) -> Fl
     return result
 
 
-def _rasterise(obstacle: Obstacle, index: int, east: FloatArray, north: FloatArray,
-               ground: NDArray[np.float32], surface: NDArray[np.float32],
+def _rasterise(obstacle: Obstacle, index: int, spec: TerrainSpec, east: FloatArray,
+               north: FloatArray, ground: NDArray[np.float32], surface: NDArray[np.float32],
                ids: NDArray[np.int16]) -> None:
-    res = east[1] - east[0] if len(east) > 1 else 1.0
-    reach = obstacle.bounding_radius()
-    i0 = max(int(math.floor((obstacle.east - reach - east[0]) / res)), 0)
-    i1 = min(int(math.ceil((obstacle.east + reach - east[0]) / res)) + 1, len(east))
-    j0 = max(int(math.floor((obstacle.north - reach - north[0]) / res)), 0)
-    j1 = min(int(math.ceil((obstacle.north + reach - north[0]) / res)) + 1, len(north))
+    # the footprint's bounding box (the work the world reader bounds), not its circle
+    i0, i1, j0, j1 = raster_window(obstacle, spec)
     if i0 >= i1 or j0 >= j1:
         return
     de = east[None, i0:i1] - obstacle.east

@@ -15,7 +15,11 @@ A world file is a small XML document (``docs/worlds.md``)::
 
 :func:`load_world` reads it with a hardened lxml parser (no DTD, no entities, no network,
 a size limit) into frozen dataclasses, collecting every problem as a ``file:line: message``
-line of one :class:`~afa.errors.ConfigError`.
+line of one :class:`~afa.errors.ConfigError`. A file that loads is bounded in everything
+that costs: every number has a range, the counts of obstacles, waypoints and drive
+commands have limits, and so have the terrain grid and the work of rasterising the
+obstacles into it (per obstacle and per file), so building a world's terrain takes
+seconds at most whatever the file says (``docs/worlds.md``, "Limits").
 
 Coordinates: ``east``/``north`` metres in the local tangent plane (ENU) at the origin;
 ``up`` metres along the origin's vertical above ``origin.elevation``. Headings are degrees
@@ -25,6 +29,7 @@ geodetic coordinates (via ECEF), so the conversion error is only floating point.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,12 +42,36 @@ from afa.errors import ConfigError
 
 __all__ = [
     "World", "Origin", "TerrainSpec", "Obstacle", "ObstacleType", "VehicleStart",
-    "Waypoint", "Mission", "DriveCommand", "load_world", "parse_world",
-    "MAX_WORLD_BYTES", "WGS84_A", "WGS84_F",
+    "Waypoint", "Mission", "DriveCommand", "load_world", "parse_world", "raster_window",
+    "raster_cells", "terrain_cells", "MAX_WORLD_BYTES", "MAX_TERRAIN_CELLS", "MAX_OBSTACLES",
+    "MAX_OBSTACLE_CELLS", "MAX_RASTER_CELLS", "MAX_WAYPOINTS", "MAX_DRIVE_COMMANDS",
+    "MAX_DRIVE_TIME", "WGS84_A", "WGS84_F",
 ]
 
-#: World files larger than this are refused (the shipped ones are ~2 kB).
+#: World files larger than this are refused (the shipped ones are 2-9 kB).
 MAX_WORLD_BYTES = 4 * 1024 * 1024
+#: Terrain grid samples, at most 4097 x 4097 (a 400 m square at 0.1 m, 1 km at 0.25 m):
+#: building one costs ~2 s and ~0.5 GB (the shipped open field: 4e6 samples, 0.35 s).
+MAX_TERRAIN_CELLS = 4097 * 4097
+#: Obstacles per world (the obstacle-id grid is int16; each costs ~50 us to rasterise).
+MAX_OBSTACLES = 10_000
+#: Grid samples one obstacle may cover when rasterised (its footprint's axis-aligned box,
+#: :func:`raster_cells`): 2000 x 2000, a 200 m square at 0.1 m.
+MAX_OBSTACLE_CELLS = 4_000_000
+#: ... and all the obstacles of a world together (the shipped worlds: 17,000 at most).
+MAX_RASTER_CELLS = 32_000_000
+#: Mission waypoints and drive commands per world.
+MAX_WAYPOINTS = 10_000
+MAX_DRIVE_COMMANDS = 10_000
+#: The last drive command's time, at most (s): one day.
+MAX_DRIVE_TIME = 86_400.0
+#: Obstacle sizes (m): length, width and diameter; height and depth.
+MAX_OBSTACLE_SIZE = 1000.0
+MAX_OBSTACLE_HEIGHT = 100.0
+#: The origin's ellipsoid height (m): below the Dead Sea shore, above Everest.
+ELEVATION_RANGE = (-1000.0, 10_000.0)
+#: Problems listed in one ConfigError (a broken file could otherwise list 100,000).
+MAX_PROBLEMS = 100
 
 #: WGS84 semi-major axis (m) and flattening (NIMA TR8350.2).
 WGS84_A = 6378137.0
@@ -205,6 +234,14 @@ class Obstacle:
             return self.radius
         return math.hypot(self.length, self.width) / 2.0
 
+    def extent(self) -> tuple[float, float]:
+        """Half-sizes east and north (m) of the footprint's axis-aligned bounding box."""
+        if self.type == "cylinder":
+            return self.radius, self.radius
+        h = math.radians(self.heading)
+        s, c = abs(math.sin(h)), abs(math.cos(h))
+        return (self.length * s + self.width * c) / 2.0, (self.length * c + self.width * s) / 2.0
+
 
 @dataclass(frozen=True)
 class VehicleStart:
@@ -262,13 +299,12 @@ class World:
 
     def command_at(self, time: float) -> tuple[float, float]:
         """(speed m/s, steering deg) the drive script commands at ``time``; (0, 0) before
-        the first command and when there is no script."""
-        speed, steering = 0.0, 0.0
-        for command in self.drive:
-            if command.time > time:
-                break
-            speed, steering = command.speed, command.steering
-        return speed, steering
+        the first command and when there is no script. O(log n) in the commands."""
+        index = bisect.bisect_right(self.drive, time, key=lambda command: command.time)
+        if index == 0:
+            return 0.0, 0.0
+        command = self.drive[index - 1]
+        return command.speed, command.steering
 
     @property
     def drive_duration(self) -> float:
@@ -276,7 +312,40 @@ class World:
         return self.drive[-1].time if self.drive else 0.0
 
 
+# --------------------------------------------------------------------------- work
+def raster_window(obstacle: Obstacle, terrain: TerrainSpec) -> tuple[int, int, int, int]:
+    """Grid index ranges ``(i0, i1, j0, j1)`` (east columns, north rows, ends exclusive)
+    that rasterising ``obstacle`` on ``terrain`` touches: its footprint's bounding box and
+    one sample more on each side, clipped to the grid. Empty ranges when it is off the
+    grid. Raises ValueError/OverflowError for non-finite or absurd sizes (the world
+    reader bounds them first)."""
+    res = terrain.resolution
+    nx = int(round(terrain.width / res)) + 1
+    ny = int(round(terrain.depth / res)) + 1
+    half_east, half_north = obstacle.extent()
+    east0, north0 = -terrain.width / 2.0, -terrain.depth / 2.0
+    i0 = max(int(math.floor((obstacle.east - half_east - east0) / res)), 0)
+    i1 = min(int(math.ceil((obstacle.east + half_east - east0) / res)) + 1, nx)
+    j0 = max(int(math.floor((obstacle.north - half_north - north0) / res)), 0)
+    j1 = min(int(math.ceil((obstacle.north + half_north - north0) / res)) + 1, ny)
+    return i0, max(i0, i1), j0, max(j0, j1)
+
+
+def raster_cells(obstacle: Obstacle, terrain: TerrainSpec) -> int:
+    """Grid samples rasterising ``obstacle`` touches (:func:`raster_window`): its cost."""
+    i0, i1, j0, j1 = raster_window(obstacle, terrain)
+    return (i1 - i0) * (j1 - j0)
+
+
+def terrain_cells(terrain: TerrainSpec) -> float:
+    """Samples of the terrain grid (a float: inf for absurd sizes)."""
+    return (terrain.width / terrain.resolution + 1) * (terrain.depth / terrain.resolution + 1)
+
+
 # --------------------------------------------------------------------------- parsing
+_SIZE_LIMITS = {"length": MAX_OBSTACLE_SIZE, "width": MAX_OBSTACLE_SIZE,
+                "radius": MAX_OBSTACLE_SIZE / 2, "height": MAX_OBSTACLE_HEIGHT,
+                "depth": MAX_OBSTACLE_HEIGHT}
 _OBSTACLE_FIELDS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     # type: (required attributes, optional attributes) besides "type"
     "box": (("east", "north", "length", "width", "height"), ("heading",)),
@@ -291,10 +360,35 @@ class _Reader:
     def __init__(self, path: Path) -> None:
         self.path = path
         self.problems: list[str] = []
+        self.omitted = 0
+        self._omitted_line = 0
 
     def problem(self, element: etree._Element | None, message: str) -> None:
         line = element.sourceline if element is not None and element.sourceline else 1
-        self.problems.append(f"{self.path}:{line}: {message}")
+        if len(self.problems) < MAX_PROBLEMS:
+            self.problems.append(f"{self.path}:{line}: {message}")
+        else:
+            self.omitted += 1
+            self._omitted_line = self._omitted_line or line
+
+    @property
+    def count(self) -> int:
+        """Problems found so far, listed or not."""
+        return len(self.problems) + self.omitted
+
+    def all_problems(self) -> list[str]:
+        """The problems, with a last line counting those beyond :data:`MAX_PROBLEMS`."""
+        if not self.omitted:
+            return self.problems
+        return self.problems + [f"{self.path}:{self._omitted_line}: ... and {self.omitted} "
+                                "more problems (only the first 100 are listed)"]
+
+    def limited(self, elements: list[etree._Element], limit: int, what: str
+                ) -> list[etree._Element]:
+        """The first ``limit`` elements; one problem at the first one beyond."""
+        if len(elements) > limit:
+            self.problem(elements[limit], f"more than {limit} {what} (the limit)")
+        return elements[:limit]
 
     def check_attributes(self, element: etree._Element, required: tuple[str, ...],
                          optional: tuple[str, ...] = ()) -> bool:
@@ -314,38 +408,46 @@ class _Reader:
     def number(self, element: etree._Element, name: str, default: float | None = None, *,
                minimum: float | None = None, positive: bool = False,
                maximum: float | None = None) -> float:
+        """The attribute as a finite float in range, or NaN after reporting why not (a
+        missing required attribute is reported by :meth:`check_attributes`)."""
         raw = element.get(name)
         if raw is None:
-            if default is None:
-                return math.nan  # already reported by check_attributes
-            return default
+            return math.nan if default is None else default
+        shown = raw if len(raw) <= 40 else raw[:37] + "..."
         try:
-            value = float(raw.strip())
+            value = float(raw)
         except ValueError:
-            self.problem(element, f"<{element.tag}> {name}={raw!r}: not a number")
+            self.problem(element, f"<{element.tag}> {name}={shown!r}: not a number")
             return math.nan
         if not math.isfinite(value):
-            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be finite")
-            return math.nan
-        if positive and value <= 0:
-            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be > 0")
+            problem = "must be finite"
+        elif positive and value <= 0:
+            problem = "must be > 0"
         elif minimum is not None and value < minimum:
-            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be >= {minimum:g}")
+            problem = f"must be >= {minimum:g}"
         elif maximum is not None and value > maximum:
-            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be <= {maximum:g}")
-        return value
+            problem = f"must be <= {maximum:g}"
+        else:
+            return value
+        self.problem(element, f"<{element.tag}> {name}={shown!r}: {problem}")
+        return math.nan
 
-    def integer(self, element: etree._Element, name: str, default: int) -> int:
+    def integer(self, element: etree._Element, name: str, default: int, *,
+                maximum: int = 2 ** 63 - 1) -> int:
+        """The attribute as an integer in 0..maximum, or ``default`` after reporting."""
         raw = element.get(name)
         if raw is None:
             return default
+        shown = raw if len(raw) <= 40 else raw[:37] + "..."
         try:
-            value = int(raw.strip())
+            value = int(raw) if len(raw) <= 40 else None
         except ValueError:
-            self.problem(element, f"<{element.tag}> {name}={raw!r}: not an integer")
+            value = None
+        if value is None:
+            self.problem(element, f"<{element.tag}> {name}={shown!r}: not an integer")
             return default
-        if value < 0:
-            self.problem(element, f"<{element.tag}> {name}={raw!r}: must be >= 0")
+        if not 0 <= value <= maximum:
+            self.problem(element, f"<{element.tag}> {name}={shown!r}: must be in 0..{maximum}")
             return default
         return value
 
@@ -392,7 +494,7 @@ def parse_world(data: bytes, path: str | Path = "<world>") -> World:
     reader = _Reader(path)
     world = _read_world(reader, root)
     if reader.problems or world is None:
-        raise ConfigError(reader.problems or [f"{path}:1: invalid world"])
+        raise ConfigError(reader.all_problems() or [f"{path}:1: invalid world"])
     return world
 
 
@@ -427,7 +529,9 @@ def _read_world(r: _Reader, root: etree._Element) -> World | None:
 
     origin = _read_origin(r, singles["origin"])
     terrain = _read_terrain(r, singles["terrain"])
+    obstacles = r.limited(obstacles, MAX_OBSTACLES, "obstacles")
     items = tuple(o for o in (_read_obstacle(r, e, terrain) for e in obstacles) if o is not None)
+    _check_raster_work(r, items, obstacles, terrain)
     vehicle = _read_vehicle(r, singles.get("vehicle"), terrain)
     mission = _read_mission(r, singles.get("mission"), origin, terrain)
     drive = _read_drive(r, singles.get("drive"))
@@ -440,12 +544,42 @@ def _sized(terrain: TerrainSpec) -> bool:
     return math.isfinite(terrain.width + terrain.depth)
 
 
+def _on_terrain(terrain: TerrainSpec, east: float, north: float) -> bool:
+    return math.isfinite(east) and math.isfinite(north) and terrain.contains(east, north)
+
+
+def _check_raster_work(r: _Reader, items: tuple[Obstacle, ...],
+                       elements: list[etree._Element], terrain: TerrainSpec) -> None:
+    """Bound the work of rasterising the obstacles: per obstacle and per file."""
+    cells = terrain_cells(terrain) if _sized(terrain) else math.inf
+    if not (math.isfinite(cells) and cells <= MAX_TERRAIN_CELLS
+            and math.isfinite(terrain.resolution) and terrain.resolution > 0):
+        return  # the terrain is reported already; its windows mean nothing
+    by_line = {e.sourceline: e for e in elements}
+    total = 0
+    for obstacle in items:
+        element = by_line.get(obstacle.line)
+        count = raster_cells(obstacle, terrain)
+        if count > MAX_OBSTACLE_CELLS:
+            r.problem(element, f"<obstacle> covers {count} grid samples at resolution "
+                               f"{terrain.resolution:g} m; the limit is {MAX_OBSTACLE_CELLS} "
+                               "per obstacle (make it smaller or the terrain coarser)")
+            continue
+        total += count
+        if total > MAX_RASTER_CELLS:
+            r.problem(element, f"the obstacles up to this one cover {total} grid samples "
+                               f"at resolution {terrain.resolution:g} m; the limit is "
+                               f"{MAX_RASTER_CELLS} cells per world")
+            return
+
+
 def _read_origin(r: _Reader, e: etree._Element) -> Origin:
     r.check_attributes(e, ("latitude", "longitude"), ("elevation",))
     r.no_children(e)
     return Origin(latitude=r.number(e, "latitude", minimum=-89.0, maximum=89.0),
                   longitude=r.number(e, "longitude", minimum=-180.0, maximum=180.0),
-                  elevation=r.number(e, "elevation", 0.0))
+                  elevation=r.number(e, "elevation", 0.0, minimum=ELEVATION_RANGE[0],
+                                     maximum=ELEVATION_RANGE[1]))
 
 
 def _read_terrain(r: _Reader, e: etree._Element) -> TerrainSpec:
@@ -455,9 +589,10 @@ def _read_terrain(r: _Reader, e: etree._Element) -> TerrainSpec:
     resolution = r.number(e, "resolution", 0.1, positive=True, maximum=10.0)
     if math.isfinite(width * depth * resolution) and resolution > 0:
         cells = (width / resolution + 1) * (depth / resolution + 1)
-        if cells > 64e6:
+        if cells > MAX_TERRAIN_CELLS:
             r.problem(e, f"<terrain> {width:g} x {depth:g} m at {resolution:g} m is "
-                         f"{cells:.3g} cells; the limit is 6.4e7 (use a coarser resolution)")
+                         f"{cells:.3g} cells; the limit is {MAX_TERRAIN_CELLS} (4097 x 4097; "
+                         "use a coarser resolution)")
     roughness = r.number(e, "roughness", 0.0, minimum=0.0, maximum=5.0)
     seed = r.integer(e, "seed", 0)
     slope_east = slope_north = 0.0
@@ -488,15 +623,17 @@ def _read_obstacle(r: _Reader, e: etree._Element, terrain: TerrainSpec) -> Obsta
     required, optional = _OBSTACLE_FIELDS[kind]
     ok = r.check_attributes(e, ("type",) + required, optional)
     r.no_children(e)
-    before = len(r.problems)
+    before = r.count
     values = {"east": r.number(e, "east"), "north": r.number(e, "north")}
     for name in required[2:] + optional:
-        values[name] = r.number(e, name, 0.0 if name == "heading" else None,
-                                positive=name != "heading")
-    if not ok or len(r.problems) > before or any(math.isnan(v) for v in values.values()):
+        if name == "heading":
+            values[name] = r.number(e, name, 0.0, minimum=-360.0, maximum=360.0)
+        else:
+            values[name] = r.number(e, name, positive=True, maximum=_SIZE_LIMITS[name])
+    if not ok or r.count > before or any(math.isnan(v) for v in values.values()):
         return None
     obstacle = Obstacle(type=kind, line=e.sourceline or 0, **values)  # type: ignore[arg-type]
-    if _sized(terrain) and not terrain.contains(obstacle.east, obstacle.north):
+    if _sized(terrain) and not _on_terrain(terrain, obstacle.east, obstacle.north):
         r.problem(e, f"<obstacle> at east={obstacle.east:g} north={obstacle.north:g} is "
                      f"outside the terrain (±{terrain.width / 2:g}, ±{terrain.depth / 2:g} m)")
     return obstacle
@@ -508,9 +645,9 @@ def _read_vehicle(r: _Reader, e: etree._Element | None, terrain: TerrainSpec) ->
     r.check_attributes(e, ("east", "north"), ("heading",))
     r.no_children(e)
     start = VehicleStart(east=r.number(e, "east"), north=r.number(e, "north"),
-                         heading=r.number(e, "heading", 0.0))
-    if (_sized(terrain) and math.isfinite(start.east + start.north)
-            and not terrain.contains(start.east, start.north)):
+                         heading=r.number(e, "heading", 0.0, minimum=-360.0, maximum=360.0))
+    if (_sized(terrain) and not math.isnan(start.east) and not math.isnan(start.north)
+            and not _on_terrain(terrain, start.east, start.north)):
         r.problem(e, "<vehicle> start is outside the terrain")
     return start
 
@@ -524,7 +661,7 @@ def _read_mission(r: _Reader, e: etree._Element | None, origin: Origin,
     time_limit = (r.number(e, "time-limit", minimum=1.0) if "time-limit" in e.attrib
                   else None)
     waypoints: list[Waypoint] = []
-    for child in e:
+    for child in r.limited(list(e), MAX_WAYPOINTS, "mission elements"):
         if child.tag != "waypoint":
             r.problem(child, f"unknown element <{child.tag}> in <mission> (expected waypoint)")
             continue
@@ -533,19 +670,23 @@ def _read_mission(r: _Reader, e: etree._Element | None, origin: Origin,
         if keys == {"latitude", "longitude"}:
             lat = r.number(child, "latitude", minimum=-89.0, maximum=89.0)
             lon = r.number(child, "longitude", minimum=-180.0, maximum=180.0)
-            if math.isnan(lat + lon + origin.latitude + origin.longitude):
+            if math.isnan(lat + lon + origin.latitude + origin.longitude + origin.elevation):
                 continue
             east, north = origin.to_local(lat, lon)
         elif keys == {"east", "north"}:
             east, north = r.number(child, "east"), r.number(child, "north")
-            if math.isnan(east + north + origin.latitude + origin.longitude):
+            if math.isnan(east + north + origin.latitude + origin.longitude + origin.elevation):
+                continue
+            if _sized(terrain) and not _on_terrain(terrain, east, north):
+                r.problem(child, f"<waypoint> at east={east:g} north={north:g} is outside "
+                                 "the terrain")
                 continue
             lat, lon = origin.to_geodetic(east, north)
         else:
             r.problem(child, "<waypoint> takes either latitude and longitude or east and "
                              f"north, got {', '.join(sorted(keys)) or 'no attributes'}")
             continue
-        if _sized(terrain) and not terrain.contains(east, north):
+        if _sized(terrain) and not _on_terrain(terrain, east, north):
             r.problem(child, f"<waypoint> at east={east:.1f} north={north:.1f} is outside "
                              "the terrain")
         waypoints.append(Waypoint(east, north, lat, lon, child.sourceline or 0))
@@ -559,19 +700,20 @@ def _read_drive(r: _Reader, e: etree._Element | None) -> tuple[DriveCommand, ...
         return ()
     r.check_attributes(e, ())
     commands: list[DriveCommand] = []
-    for child in e:
+    for child in r.limited(list(e), MAX_DRIVE_COMMANDS, "drive elements"):
         if child.tag != "command":
             r.problem(child, f"unknown element <{child.tag}> in <drive> (expected command)")
             continue
         if not r.check_attributes(child, ("time", "speed", "steering")):
             continue
         r.no_children(child)
-        before = len(r.problems)
-        command = DriveCommand(time=r.number(child, "time", minimum=0.0),
+        before = r.count
+        command = DriveCommand(time=r.number(child, "time", minimum=0.0,
+                                             maximum=MAX_DRIVE_TIME),
                                speed=r.number(child, "speed", minimum=-10.0, maximum=10.0),
                                steering=r.number(child, "steering", minimum=-90.0, maximum=90.0),
                                line=child.sourceline or 0)
-        if len(r.problems) > before:
+        if r.count > before:
             continue
         if commands and command.time <= commands[-1].time:
             r.problem(child, f"<command> time={command.time:g} must be later than the "

@@ -205,6 +205,14 @@ class VoteArbiter:
         entry = self._book.get(behaviour)
         return entry.vote if entry is not None else None
 
+    def expires(self) -> float | None:
+        """The earliest time (s, the clock of :meth:`receive`) at which :meth:`decide`
+        finds a vote of the book stale; None when the book is empty."""
+        if not self._book:
+            return None
+        oldest = min(entry.received for entry in self._book.values())
+        return oldest + self.stale_after + 2 * TIME_TOLERANCE
+
     def decide(self, now: float) -> ArbiterDecision:
         """Drop stale votes and decide at time ``now`` (s, the arbiter's clock).
 

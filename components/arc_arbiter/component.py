@@ -8,16 +8,22 @@ least of the chosen arc's ``maxSpeed`` over the fresh votes and
 ``setVelocity`` (which Vehicle Control obeys only while its arbiter switch is on).
 
 Fail-safe: every arc vetoed, no valid vote, or every vote stale (older than
-``StaleVoteTimeSec`` + ``StaleVoteTimeUSec``) means stop. Staleness is checked on a
-timer as well as on each vote, so a behaviour that stops voting loses its veto (and its
-say) when its vote goes stale, and an arbiter whose voters all fell silent stops the
-vehicle within 100 ms of the last vote going stale. If the arbiter itself falls silent,
-Vehicle Control's command watchdog stops the vehicle.
+``StaleVoteTimeSec`` + ``StaleVoteTimeUSec``) means stop. Staleness is checked on each
+vote, every ``STALE_CHECK_PERIOD`` and at the moment the oldest vote in the book goes
+stale, so a behaviour that stops voting loses its veto (and its say) when its vote goes
+stale, and an arbiter whose voters all fell silent commands a stop as its last vote goes
+stale. If the arbiter itself falls silent, Vehicle Control's command watchdog stops the
+vehicle.
 
 Commands go out when the decision changes and at least every ``COMMAND_REFRESH`` seconds
-(feeding Vehicle Control's watchdog), one at a time and always the latest decision. The
-decision is published as ``ArcDecision`` (:class:`~idl.planning.ArcDecisionIDL`) for the
-console and the logs, when it changes and at least every ``COMMAND_REFRESH`` seconds.
+(feeding Vehicle Control's watchdog). Deciding never waits for Vehicle Control: a sender
+task makes the ``setVelocity`` calls one at a time, always with the latest decision
+(decisions made while a call waits for its ACK are folded into the next call), except
+that a **stop** never waits behind an unacknowledged command: it is sent at once, in
+its own call. So the safety catch's halt reaches the wire within a frame time of the
+vote even when an earlier command's ACK was lost (Vehicle Control waits 50 ms for it).
+The decision is published as ``ArcDecision`` (:class:`~idl.planning.ArcDecisionIDL`) for
+the console and the logs, when it changes and at least every ``COMMAND_REFRESH`` seconds.
 """
 
 from __future__ import annotations
@@ -58,7 +64,9 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._sent_at = -1e9
         self._published: tuple[int, float, str] | None = None
         self._published_at = -1e9
-        self._lock = asyncio.Lock()
+        self._queued: ArbiterDecision | None = None  # the latest decision to command
+        self._wake = asyncio.Event()
+        self._busy = False  # the sender's call is waiting for Vehicle Control
         self.counters = {"votes": 0, "decisions": 0, "commands": 0, "command_errors": 0,
                          "failsafe_stops": 0, "rejected_votes": 0}
 
@@ -66,13 +74,22 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
         self.book = VoteArbiter(self.parameters, self.arcs,
                                 required=self.parameters.RequiredBehaviours)
-        self._sent = self._published = None
+        self._sent = self._published = self._queued = None
+        self._wake = asyncio.Event()
+        self._busy = False
 
     async def run(self) -> None:
-        async for _ in self.clock.periodic(STALE_CHECK_PERIOD):
-            await self._decide()
+        self.spawn(self._sender(), f"{self.name}:sender")
+        tick = self.clock.monotonic()
+        while True:
+            expiry = self.book.expires()
+            await self.clock.sleep_until(tick if expiry is None else min(tick, expiry))
+            now = self.clock.monotonic()
+            if now >= tick:  # the periodic check (drift-free; missed ticks skipped)
+                tick += STALE_CHECK_PERIOD * (1 + int((now - tick) / STALE_CHECK_PERIOD))
+            self._decide()
 
-    async def _on_vote(self, event: Event) -> None:
+    def _on_vote(self, event: Event) -> None:
         vote: ArcVoteIDL = event.body  # type: ignore[assignment]
         try:
             self.book.receive(vote, self.clock.monotonic())
@@ -81,9 +98,9 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
             self.set_health(False, f"vote from {vote.behaviour} refused: {exc}")
             return
         self.counters["votes"] += 1
-        await self._decide()
+        self._decide()
 
-    async def _decide(self) -> None:
+    def _decide(self) -> None:
         now = self.clock.monotonic()
         decision = self.book.decide(now)
         self.decision = decision
@@ -93,26 +110,45 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
             if decision.failsafe is not None and (self._sent is None or self._sent[1] > 0):
                 self.counters["failsafe_stops"] += 1
             self._sent, self._sent_at = key, now
-            await self._command(decision)
+            self._dispatch(decision)
         shown = (decision.index, decision.speed, decision.failsafe or "")
         if shown != self._published or now - self._published_at >= COMMAND_REFRESH - TIME_TOLERANCE:
             self._published, self._published_at = shown, now
             self._publish(decision)
 
+    def _dispatch(self, decision: ArbiterDecision) -> None:
+        """Hand ``decision`` to the sender; a stop while the sender waits goes at once."""
+        if decision.stopped and self._busy:
+            self._queued = None  # anything queued is older than this stop
+            self.spawn(self._command(decision), f"{self.name}:stop")
+            return
+        self._queued = decision
+        self._wake.set()
+
+    async def _sender(self) -> None:
+        """One setVelocity at a time, always the latest decision queued."""
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            decision, self._queued = self._queued, None
+            if decision is None:
+                continue
+            self._busy = True
+            try:
+                await self._command(decision)
+            finally:
+                self._busy = False
+
     async def _command(self, decision: ArbiterDecision) -> None:
-        """One setVelocity at a time; a later decision waits for the earlier call."""
         velocity = VelocityIDL(translation=decision.speed,
                                rotation=decision.speed * decision.curvature,
                                steeringAngle=decision.steering)
-        async with self._lock:
-            if self.decision is not decision and self.decision is not None:
-                return  # superseded while waiting: the newer one is on its way
-            try:
-                await self.control.setVelocity(velocity)
-            except AfaError as exc:  # the link is down, or Vehicle Control is restarting
-                self.counters["command_errors"] += 1
-                self.set_health(False, f"setVelocity failed: {exc}")
-                return
+        try:
+            await self.control.setVelocity(velocity)
+        except AfaError as exc:  # the link is down, or Vehicle Control is restarting
+            self.counters["command_errors"] += 1
+            self.set_health(False, f"setVelocity failed: {exc}")
+            return
         self.counters["commands"] += 1
         if not self.health().healthy and self._health_detail.startswith("setVelocity"):
             self.set_health(True, "commanding")

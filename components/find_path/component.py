@@ -24,7 +24,8 @@ runs one cycle every ``PlanEventInterval`` seconds:
    reaches it (κ = 2y/D²), published as an ``ArcVote`` (behaviour ``FindPath``), and
    the path as ``PlannedPath`` for displays. With no path (no route, the goal impassable
    and no free cell within its tolerance, or the vehicle off the map) the vote vetoes
-   every arc, as the seed says.
+   every arc, as the seed says, and the ``PlannedPath`` is empty (cost inf), so a display
+   does not keep showing a path FindPath no longer has.
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ class CostGrid:
         self.revision = plan.revision
         self.inflation, self.margin, self.margin_cost = inflation, margin, margin_cost
         self.raw = plan.planning_cost().astype(np.float64)
-        b = plan.planningBoundary
+        b = self.boundary = plan.planningBoundary
         self.inside = np.zeros(self.raw.shape, dtype=bool)
         self.inside[b.minX:b.maxX + 1, b.minY:b.maxY + 1] = True
         self.cost = self._grow(self.raw, self.inside)
@@ -190,14 +191,14 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         start = grid.cell_of(x, y)
         goal = self._goal_cell(grid, waypoint)
         if start is None or goal is None:
-            self._no_path()
+            self._no_path(grid, waypoint)
             return
         with Stopwatch() as watch:  # processing time, for statistics only
             status = self._plan(grid, start, goal)
         self.plan_times.append(watch.seconds)
         del self.plan_times[:-1000]
         if status is not PlanStatus.DONE or self.planner is None:
-            self._no_path()
+            self._no_path(grid, waypoint)
             return
         self.path = self.planner.path()
         point = self._lookahead(grid, (x, y))
@@ -225,9 +226,12 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         window = await self.global_map.getPlanMapChanges(self.grid.revision)
         if window is None:
             return self.grid
-        if window.fullRows == 0 and window.rows * window.cols != self.grid.raw.size:
+        if (window.fullRows == 0 and window.rows * window.cols != self.grid.raw.size) or \
+                window.planningBoundary != self.grid.boundary:
+            if window.fullRows:  # a window of a map with new limits: fetch the whole
+                window = await self.global_map.getPlanMap()
             self.grid = CostGrid(window, p.InflationRadius, p.MarginRadius, p.MarginCost)
-            self.planner = None  # another map: plan afresh
+            self.planner = None  # another map or other limits: plan afresh
             return self.grid
         xs, ys, new = self.grid.apply(window)
         if self.planner is not None and len(xs):
@@ -283,11 +287,16 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             chosen = points[k]
         return chosen
 
-    def _no_path(self) -> None:
+    def _no_path(self, grid: CostGrid, waypoint: WaypointIDL) -> None:
+        """Veto every arc, and publish the empty path (displays drop the old one)."""
         self.counters["no_path"] += 1
         self.path = []
+        stamp = TimeIDL.from_seconds(self.clock.now())
         self.votes.publish(ArcVotes.halt(len(self.arcs)).to_idl(
-            time=TimeIDL.from_seconds(self.clock.now()), behaviour=BEHAVIOUR, arcs=self.arcs))
+            time=stamp, behaviour=BEHAVIOUR, arcs=self.arcs))
+        self.paths.publish(PlannedPathIDL(time=stamp, points=np.zeros((0, 2)),
+                                          initialUTM=grid.initial_utm, cost=math.inf,
+                                          goal=waypoint))
 
     def statistics(self) -> dict[str, Any]:
         stats = super().statistics()

@@ -269,9 +269,12 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
                    min(cols - 1, boundary.maxY))
         if clipped[2] < clipped[0] or clipped[3] < clipped[1]:
             return False
-        self.boundary = PlanningBoundaryIDL(minX=clipped[0], minY=clipped[1], maxX=clipped[2],
-                                            maxY=clipped[3])
-        self._whole_map = None
+        boundary = PlanningBoundaryIDL(minX=clipped[0], minY=clipped[1], maxX=clipped[2],
+                                       maxY=clipped[3])
+        if boundary != self.boundary:
+            self.boundary = boundary
+            # a planner holding the map must learn the new limits: a change of the whole
+            self._changed(Region(0, rows, 0, cols))
         return True
 
     async def getPlanningBoundary(self) -> PlanningBoundaryIDL:

@@ -991,9 +991,21 @@ def encode_prompt(port: str = "COM1") -> bytes:
 
 # ------------------------------------------------------------------ host-side decoder
 
-_ASCII_NAME = re.compile(rb"#[A-Z][A-Z0-9_]*[,]")
+_NAME_FIRST = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZ")
+_NAME_CHARS = _NAME_FIRST | frozenset(b"0123456789_")
+_MAX_ASCII_NAME: Final = 40  # '#', the log name and its ',' (longest OEM4 name: 20)
 _NMEA_ADDRESS_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789")
 _HEX = frozenset(b"0123456789abcdefABCDEF")
+#: Sync and header-length byte: where a binary log can start (the header length is fixed).
+_BINARY_HEAD: Final = BINARY_SYNC + bytes([BINARY_HEADER_LENGTH])
+#: Bytes that start a text frame. None occurs inside an NMEA sentence ('$' is reserved by
+#: NMEA 0183) or a command response, so meeting one ends such a frame as damaged.
+_TEXT_STARTS: Final = frozenset(b"#$<[")
+#: A NovAtel ASCII log may carry quoted free text, so only '#' ends one as damaged (its
+#: CRC-32 rejects any other frame it might run into).
+_ASCII_LOG_STOPS: Final = frozenset(b"#")
+#: Bytes fed to the lookahead decoder at a time (it stops at its first message).
+_PROBE_PIECE: Final = 256
 
 
 def _printable(byte: int) -> bool:
@@ -1012,21 +1024,60 @@ class GpsDecoder(StreamDecoder[GpsMessage]):
     Resynchronisation: a bad frame is dropped only up to the next byte that could start
     a frame (``AA # $ < [``). A binary sync must carry the 28-byte header length, and
     BESTPOS/BESTVEL/BESTUTM their fixed payload lengths (72/44/80), to count as a frame
-    start; a binary header that claims more bytes than have arrived is waited for unless
-    a complete valid frame already follows it (then it was line noise). ``feed`` never
-    raises.
+    start. A frame never contains the start of another frame where that can be told:
+
+    - a binary log never contains ``AA 44 12 1C`` (another binary header; 2^-32 per byte
+      of a real log), so a header whose claimed length reaches past the next header is
+      dropped when that header arrives;
+    - an NMEA sentence or a command response ends at ``# $ < [`` (none occurs inside
+      one), so a sentence or ``<ERROR:...`` that lost its line end never absorbs the log
+      behind it;
+    - a NovAtel ASCII log ends at ``#`` (its CRC-32 rejects any other frame it runs into).
+
+    A binary header that claims more bytes than have arrived is waited for unless the
+    bytes after it already decode to a frame (``lookahead``: a second decoder reads them
+    as they arrive; a false header in line noise then costs no latency). Decoding costs
+    a bounded amount of work per byte, whatever the bytes (see :mod:`afa.codec`).
+    ``feed`` never raises.
     """
 
+    def __init__(self, *, max_buffer: int = 1 << 16, lookahead: bool = True) -> None:
+        super().__init__(max_buffer=max_buffer)
+        self._lookahead = lookahead
+        # Resume state of the front frame, valid while self.searched > 0 (same front):
+        self._blanks = 0  # CR/LF bytes before the frame
+        self._ascii_body = -1  # index of an ASCII log's first body byte; -1: in the name
+        # The lookahead decoder, reading what follows a pending binary frame:
+        self._probe: GpsDecoder | None = None
+        self._probe_at = -1  # stream offset of that frame
+        self._probe_fed = 0  # stream offset of the next byte to give the probe
+        self._probe_used = False
+
+    def reset(self) -> None:
+        super().reset()
+        self._probe = None
+        self._probe_at = -1
+
     def scan(self, buffer: bytearray) -> Scan[GpsMessage]:
+        self._probe_used = False
+        result = self._scan(buffer)
+        if not self._probe_used:
+            self._probe = None  # the frame it looked behind is gone
+        return result
+
+    def _scan(self, buffer: bytearray) -> Scan[GpsMessage]:
         n = len(buffer)
-        start = 0
+        start = self._blanks if self.searched else 0
         while start < n and buffer[start] in (_CR, _LF):
             start += 1
+        self._blanks = start
         if start == n:
-            return Scan.need_more() if n <= _MAX_LEADING_BLANKS else Scan.skip(n, Fault.GARBAGE)
+            if n <= _MAX_LEADING_BLANKS:
+                return Scan.need_more(searched=n)
+            return Scan.skip(n, Fault.GARBAGE)
         if buffer[start] not in _HOST_SYNC_BYTES:
             return Scan.skip(self._next_sync(buffer, start), Fault.GARBAGE)
-        result = self._scan_at(buffer, start, lookahead=True)
+        result = self._scan_at(buffer, start)
         if result.consumed == 0:
             return result
         if result.fault is None and result.message is not None:
@@ -1034,10 +1085,10 @@ class GpsDecoder(StreamDecoder[GpsMessage]):
         # A bad frame: drop it only up to the next byte that could start a frame.
         return Scan.skip(self._next_sync(buffer, start), result.fault or Fault.MALFORMED)
 
-    def _scan_at(self, buffer: bytearray, start: int, lookahead: bool) -> Scan[GpsMessage]:
+    def _scan_at(self, buffer: bytearray, start: int) -> Scan[GpsMessage]:
         first = buffer[start]
         if first == 0xAA:
-            return self._scan_binary(buffer, start, lookahead)
+            return self._scan_binary(buffer, start)
         if first == 0x23:  # '#'
             return self._scan_ascii(buffer, start)
         if first == 0x24:  # '$'
@@ -1046,14 +1097,10 @@ class GpsDecoder(StreamDecoder[GpsMessage]):
             return self._scan_response(buffer, start)
         return self._scan_prompt(buffer, start)
 
-    def _complete_frame_after(self, buffer: bytearray, start: int) -> bool:
-        """True if a complete, valid frame starts somewhere after ``start``."""
-        for i in range(start + 1, len(buffer)):
-            if buffer[i] in _HOST_SYNC_BYTES:
-                result = self._scan_at(buffer, i, lookahead=False)
-                if result.consumed and result.fault is None:
-                    return True
-        return False
+    def _resume(self, start: int) -> int:
+        """Where the search of the frame at ``start`` goes on: after what earlier reads
+        searched already."""
+        return max(start + 1, self.searched)
 
     @staticmethod
     def _next_sync(buffer: bytearray, start: int) -> int:
@@ -1065,54 +1112,70 @@ class GpsDecoder(StreamDecoder[GpsMessage]):
 
     # Each _scan_* looks at buffer[start:]; a frame's consumed count is relative to start.
 
-    def _scan_binary(self, buffer: bytearray, start: int,
-                     lookahead: bool) -> Scan[GpsMessage]:
-        avail = len(buffer) - start
-        if avail < 3:
-            if bytes(buffer[start:]) == BINARY_SYNC[:avail]:
-                return Scan.need_more()
-            return Scan.skip(1, Fault.GARBAGE)
-        if bytes(buffer[start:start + 3]) != BINARY_SYNC:
-            return Scan.skip(1, Fault.GARBAGE)
+    def _scan_binary(self, buffer: bytearray, start: int) -> Scan[GpsMessage]:
+        n = len(buffer)
+        avail = n - start
+        head = bytes(buffer[start:start + 4])
+        if head != _BINARY_HEAD[:len(head)]:
+            return Scan.skip(1, Fault.GARBAGE)  # not a sync, or a header length not 28
         if avail < 10:
             return Scan.need_more()
-        header_length = buffer[start + 3]
-        if header_length != BINARY_HEADER_LENGTH:
-            return Scan.skip(1, Fault.GARBAGE)
         (message_id,) = struct.unpack_from("<H", buffer, start + 4)
         (message_length,) = struct.unpack_from("<H", buffer, start + 8)
         expected = _PAYLOAD_LENGTHS.get(message_id)
         if expected is not None and message_length != expected:
             return Scan.skip(1, Fault.GARBAGE)  # a known log always has its length
-        total = header_length + message_length + 4
+        total = BINARY_HEADER_LENGTH + message_length + 4
         if total > _MAX_BINARY_FRAME:
             return Scan.skip(1, Fault.OVERFLOW)
-        if avail < total:
-            # A spurious sync in line noise can claim a long frame and hold back the real
-            # frames behind it; if a complete valid frame already follows, give up on it.
-            if lookahead and self._complete_frame_after(buffer, start):
+        end = start + total
+        resume = self._resume(start)
+        if buffer.find(_BINARY_HEAD, resume, min(n, end)) >= 0:
+            return Scan.skip(1, Fault.GARBAGE)  # another header inside: this one is false
+        if n < end:
+            if self._lookahead and self._frames_follow(buffer, start):
                 return Scan.skip(1, Fault.GARBAGE)
-            return Scan.need_more()
-        frame = bytes(buffer[start:start + total])
+            return Scan.need_more(searched=max(resume, n - len(_BINARY_HEAD) + 1))
+        frame = bytes(buffer[start:end])
         (crc,) = _CRC.unpack_from(frame, total - 4)
         if crc32_novatel(frame[:-4]) != crc:
             return Scan.skip(1, Fault.CHECKSUM)
         try:
             message_id, _, header = _decode_binary_header(frame)
-            payload = frame[header_length:header_length + message_length]
+            payload = frame[BINARY_HEADER_LENGTH:BINARY_HEADER_LENGTH + message_length]
             return Scan.frame(total, _decode_binary_payload(message_id, header, payload))
         except (_Malformed, ValueError, struct.error):
             return Scan.skip(1, Fault.MALFORMED)
 
-    @staticmethod
-    def _find_star(buffer: bytearray, start: int, limit: int) -> int | None | Fault:
-        """Index of the ``*`` ending a text frame; None: need more; a Fault: not a frame."""
+    def _frames_follow(self, buffer: bytearray, start: int) -> bool:
+        """Whether the bytes after the pending binary frame at ``start`` decode to a
+        frame. A second decoder (without lookahead) reads them once, as they arrive, and
+        stops at its first message."""
+        self._probe_used = True
+        base = self.front_position
+        if self._probe is None or self._probe_at != base + start:
+            self._probe = type(self)(max_buffer=self._max_buffer, lookahead=False)
+            self._probe_at = base + start
+            self._probe_fed = base + start + 1
+        while self._probe_fed < base + len(buffer):
+            offset = self._probe_fed - base
+            piece = bytes(buffer[offset:offset + _PROBE_PIECE])
+            self._probe_fed += len(piece)
+            if self._probe.feed(piece):
+                self._probe = None
+                return True
+        return False
+
+    def _find_star(self, buffer: bytearray, start: int, limit: int, stops: frozenset[int],
+                   resume: int) -> int | None | Fault:
+        """Index of the ``*`` ending a text frame, searching on from ``resume``; None:
+        need more; a Fault: not a frame (a byte in ``stops`` or not printable)."""
         end = min(len(buffer), start + limit)
-        for i in range(start + 1, end):
+        for i in range(resume, end):
             byte = buffer[i]
             if byte == 0x2A:  # '*'
                 return i
-            if not _printable(byte):
+            if byte in stops or not _printable(byte):
                 return Fault.MALFORMED
         if len(buffer) - start >= limit:
             return Fault.OVERFLOW
@@ -1120,14 +1183,26 @@ class GpsDecoder(StreamDecoder[GpsMessage]):
 
     def _scan_ascii(self, buffer: bytearray, start: int) -> Scan[GpsMessage]:
         # '#' + upper-case log name + ',' or it is not a NovAtel log at all.
-        probe = bytes(buffer[start:start + 40])
-        match = _ASCII_NAME.match(probe)
-        if match is None:
-            partial = re.fullmatch(rb"#([A-Z][A-Z0-9_]*)?", probe)
-            if partial is not None and len(probe) < 40:
-                return Scan.need_more()
-            return Scan.skip(1, Fault.GARBAGE)
-        return self._scan_starred(buffer, start, _MAX_ASCII_LOG, 8, crc32_novatel,
+        body = self._ascii_body if self.searched > start else -1
+        if body < 0:
+            i = self._resume(start)
+            end = min(len(buffer), start + _MAX_ASCII_NAME)
+            while i < end:
+                byte = buffer[i]
+                if byte == 0x2C and i > start + 1:  # ','
+                    body = i + 1
+                    break
+                if byte not in (_NAME_CHARS if i > start + 1 else _NAME_FIRST):
+                    return Scan.skip(1, Fault.GARBAGE)
+                i += 1
+            else:
+                if len(buffer) - start >= _MAX_ASCII_NAME:
+                    return Scan.skip(1, Fault.GARBAGE)
+                self._ascii_body = -1
+                return Scan.need_more(searched=i)
+            self._ascii_body = body
+        return self._scan_starred(buffer, start, _MAX_ASCII_LOG, _ASCII_LOG_STOPS,
+                                  max(body, self.searched), 8, crc32_novatel,
                                   _decode_ascii_log)
 
     def _scan_nmea(self, buffer: bytearray, start: int) -> Scan[GpsMessage]:
@@ -1135,23 +1210,26 @@ class GpsDecoder(StreamDecoder[GpsMessage]):
         for i in range(start + 1, min(len(buffer), start + 3)):
             if buffer[i] not in _NMEA_ADDRESS_CHARS:
                 return Scan.skip(1, Fault.GARBAGE)
-        return self._scan_starred(buffer, start, _MAX_NMEA, 2, nmea_checksum, _decode_nmea)
+        return self._scan_starred(buffer, start, _MAX_NMEA, _TEXT_STARTS,
+                                  self._resume(start), 2, nmea_checksum, _decode_nmea)
 
-    def _scan_starred(self, buffer: bytearray, start: int, limit: int, n_digits: int,
+    def _scan_starred(self, buffer: bytearray, start: int, limit: int,
+                      stops: frozenset[int], resume: int, n_digits: int,
                       checksum: Callable[[bytes], int],
                       decode: Callable[[str], GpsMessage]) -> Scan[GpsMessage]:
         """The common tail of NovAtel ASCII logs and NMEA sentences: the body up to
-        ``*``, ``n_digits`` hex digits of ``checksum(body)``, then ``decode`` the body."""
-        star = self._find_star(buffer, start, limit)
+        ``*`` (searched from ``resume``), ``n_digits`` hex digits of ``checksum(body)``,
+        then ``decode`` the body."""
+        star = self._find_star(buffer, start, limit, stops, resume)
         if star is None:
-            return Scan.need_more()
+            return Scan.need_more(searched=len(buffer))
         if isinstance(star, Fault):
             return Scan.skip(1, star)
         digits = bytes(buffer[star + 1:star + 1 + n_digits])
         if not all(b in _HEX for b in digits):
             return Scan.skip(1, Fault.MALFORMED)
         if len(digits) < n_digits:
-            return Scan.need_more()
+            return Scan.need_more(searched=star)
         body = bytes(buffer[start + 1:star])
         if checksum(body) != int(digits, 16):
             return Scan.skip(1, Fault.CHECKSUM)
@@ -1160,29 +1238,29 @@ class GpsDecoder(StreamDecoder[GpsMessage]):
         except (_Malformed, ValueError, IndexError):
             return Scan.skip(1, Fault.MALFORMED)
 
-    @staticmethod
-    def _scan_response(buffer: bytearray, start: int) -> Scan[GpsMessage]:
+    def _scan_response(self, buffer: bytearray, start: int) -> Scan[GpsMessage]:
+        # '<OK' or '<ERROR:text', ended by CR or LF. A frame start inside means the
+        # response lost its line end: it is dropped, and the frame behind it decodes.
         end = min(len(buffer), start + _MAX_RESPONSE)
-        for i in range(start + 1, end):
+        for i in range(self._resume(start), end):
             byte = buffer[i]
             if byte in (_CR, _LF):
+                if byte == _CR and i + 1 >= len(buffer):
+                    return Scan.need_more(searched=i)  # is an LF coming?
                 text = bytes(buffer[start + 1:i]).decode("ascii")
                 consumed = i + 1 - start
-                if byte == _CR:
-                    if i + 1 >= len(buffer):
-                        return Scan.need_more()
-                    if buffer[i + 1] == _LF:
-                        consumed += 1
+                if byte == _CR and buffer[i + 1] == _LF:
+                    consumed += 1
                 if text == "OK":
                     return Scan.frame(consumed, CommandResponse(True, "OK"))
                 if text.startswith("ERROR:"):
                     return Scan.frame(consumed, CommandResponse(False, text[6:]))
                 return Scan.skip(1, Fault.GARBAGE)
-            if not _printable(byte):
+            if byte in _TEXT_STARTS or not _printable(byte):
                 return Scan.skip(1, Fault.GARBAGE)
         if len(buffer) - start >= _MAX_RESPONSE:
             return Scan.skip(1, Fault.GARBAGE)
-        return Scan.need_more()
+        return Scan.need_more(searched=end)
 
     @staticmethod
     def _scan_prompt(buffer: bytearray, start: int) -> Scan[GpsMessage]:
@@ -1299,18 +1377,30 @@ class GpsDeviceDecoder(StreamDecoder[GpsCommand]):
 
     A line ends at CR, LF or CR LF; fields are separated by spaces or commas and are
     case-insensitive. Blank lines are absorbed. Non-printable bytes are skipped as
-    garbage. ``feed`` never raises.
+    garbage. A line has no start marker, so a line that lost its line end runs into the
+    next (as it does in the receiver). A line arriving byte by byte is searched once.
+    ``feed`` never raises.
     """
+
+    def __init__(self, *, max_buffer: int = 1 << 16) -> None:
+        super().__init__(max_buffer=max_buffer)
+        self._blanks = 0  # blanks before the line; valid while self.searched > 0
 
     def scan(self, buffer: bytearray) -> Scan[GpsCommand]:
         n = len(buffer)
-        start = 0
-        while start < n and buffer[start] in (_CR, _LF, 0x20):
-            start += 1
-        if start == n:
-            return Scan.need_more() if n <= _MAX_LEADING_BLANKS else Scan.skip(n, Fault.GARBAGE)
+        resume = self.searched
+        start = self._blanks if resume else 0
+        if not resume or resume == start:  # still among the leading blanks
+            while start < n and buffer[start] in (_CR, _LF, 0x20):
+                start += 1
+            self._blanks = start
+            if start == n:
+                if n <= _MAX_LEADING_BLANKS:
+                    return Scan.need_more(searched=n)
+                return Scan.skip(n, Fault.GARBAGE)
+            resume = start
         end = min(n, start + _MAX_COMMAND_LINE)
-        for i in range(start, end):
+        for i in range(resume, end):
             byte = buffer[i]
             if byte in (_CR, _LF):
                 consumed = i + 1
@@ -1322,7 +1412,7 @@ class GpsDeviceDecoder(StreamDecoder[GpsCommand]):
                 return Scan.skip(i + 1, Fault.GARBAGE)
         if n - start >= _MAX_COMMAND_LINE:
             return Scan.skip(n, Fault.OVERFLOW)
-        return Scan.need_more()
+        return Scan.need_more(searched=end)
 
 
 # ------------------------------------------------------------------------------- UTM

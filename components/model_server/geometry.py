@@ -46,7 +46,13 @@ from afa.config.miro import parse_xml, read_bounded
 from afa.errors import ConfigError, EOutOfBounds
 
 __all__ = [
+    "MAX_ANGLE_DEG",
+    "MAX_BODIES",
+    "MAX_CONSTRAINTS",
     "MAX_FILE_BYTES",
+    "MAX_FRAMES",
+    "MAX_MODEL_BYTES",
+    "MAX_TRANSLATION_M",
     "ROTATION_TOLERANCE_DEG",
     "TRANSLATION_TOLERANCE_M",
     "Constraint",
@@ -62,6 +68,15 @@ TRANSLATION_TOLERANCE_M = 1e-3
 ROTATION_TOLERANCE_DEG = 0.01
 #: Geometry files are small; refuse anything larger before parsing it.
 MAX_FILE_BYTES = 1 << 20
+#: ... and all the files of one model together (the Raptor's: 14 kB).
+MAX_MODEL_BYTES = 4 << 20
+#: Bodies in an assembly, frames of all its bodies, constraints: the Raptor has 6, 43, 5.
+MAX_BODIES = 1000
+MAX_FRAMES = 10_000
+MAX_CONSTRAINTS = 10_000
+#: A translation component (m) and an angle (deg), in absolute value.
+MAX_TRANSLATION_M = 10_000.0
+MAX_ANGLE_DEG = 360.0
 
 _SCHEMA_VERSION = "1"
 _IDENTIFIER = re.compile(r"[^\s:]+")
@@ -184,12 +199,26 @@ class _BodyFile:
 # ------------------------------------------------------------------ XML reading
 
 
-def _read_xml(path: Path, root_tag: str, where: str) -> etree._Element:
+class _Budget:
+    """What the files of one model may still hold, in bytes (:data:`MAX_MODEL_BYTES`)."""
+
+    def __init__(self) -> None:
+        self.left = MAX_MODEL_BYTES
+
+    def spend(self, size: int, where: str) -> None:
+        self.left -= size
+        if self.left < 0:
+            raise ConfigError(f"{where}: the model's files hold more than "
+                              f"{MAX_MODEL_BYTES} bytes together (the limit)")
+
+
+def _read_xml(path: Path, root_tag: str, where: str, budget: _Budget) -> etree._Element:
     """Parse one geometry file safely; ``where`` prefixes messages about reading it."""
     try:
         data = read_bounded(path, MAX_FILE_BYTES)
     except OSError as exc:
         raise ConfigError(f"{where}: cannot read {path}: {exc.strerror or exc}") from exc
+    budget.spend(len(data), where)
     root = parse_xml(data, path)
     if root.tag != root_tag:
         raise ConfigError(f"{path}:{root.sourceline}: the root element must be <{root_tag}>, "
@@ -225,14 +254,20 @@ def _check_version(path: Path, element: etree._Element) -> None:
                           f"supported (only {_SCHEMA_VERSION!r})")
 
 
-def _number(path: Path, element: etree._Element, attribute: str) -> float:
+def _number(path: Path, element: etree._Element, attribute: str, limit: float) -> float:
+    """The attribute as a decimal number within ``[-limit, limit]``, 0 if absent."""
     text = element.get(attribute)
     if text is None:
         return 0.0
+    shown = text if len(text) <= 40 else text[:37] + "..."
     if not _NUMBER.fullmatch(text.strip()):
-        raise ConfigError(f"{path}:{element.sourceline}: <{element.tag} {attribute}={text!r}>: "
+        raise ConfigError(f"{path}:{element.sourceline}: <{element.tag} {attribute}={shown!r}>: "
                           "not a decimal number")
-    return float(text)
+    value = float(text)
+    if not abs(value) <= limit:
+        raise ConfigError(f"{path}:{element.sourceline}: <{element.tag} {attribute}={shown!r}>: "
+                          f"must be within ±{limit:g}")
+    return value
 
 
 def _pose(path: Path, element: etree._Element) -> np.ndarray | None:
@@ -246,14 +281,16 @@ def _pose(path: Path, element: etree._Element) -> np.ndarray | None:
             if translation is not None:
                 raise ConfigError(f"{path}:{child.sourceline}: a second <translation>")
             _check_attributes(path, child, ("x", "y", "z"))
-            translation = (_number(path, child, "x"), _number(path, child, "y"),
-                           _number(path, child, "z"))
+            translation = (_number(path, child, "x", MAX_TRANSLATION_M),
+                           _number(path, child, "y", MAX_TRANSLATION_M),
+                           _number(path, child, "z", MAX_TRANSLATION_M))
         elif child.tag == "rotation":
             if rotation is not None:
                 raise ConfigError(f"{path}:{child.sourceline}: a second <rotation>")
             _check_attributes(path, child, ("roll", "pitch", "yaw"))
-            rotation = (_number(path, child, "roll"), _number(path, child, "pitch"),
-                        _number(path, child, "yaw"))
+            rotation = (_number(path, child, "roll", MAX_ANGLE_DEG),
+                        _number(path, child, "pitch", MAX_ANGLE_DEG),
+                        _number(path, child, "yaw", MAX_ANGLE_DEG))
         else:
             hint = _suggest(str(child.tag), ["translation", "rotation", "description"])
             raise ConfigError(f"{path}:{child.sourceline}: unexpected <{child.tag}> in "
@@ -263,8 +300,8 @@ def _pose(path: Path, element: etree._Element) -> np.ndarray | None:
     return homogeneous_transform(translation or (0.0, 0.0, 0.0), rotation or (0.0, 0.0, 0.0))
 
 
-def _read_body_file(path: Path, where: str) -> _BodyFile:
-    root = _read_xml(path, "body", where)
+def _read_body_file(path: Path, where: str, budget: _Budget) -> _BodyFile:
+    root = _read_xml(path, "body", where, budget)
     _check_attributes(path, root, ("type", "version", "reference"), ("type", "reference"))
     _check_version(path, root)
     reference = _identifier(path, root, "reference")
@@ -333,11 +370,14 @@ class GeometryModel:
         them raises :class:`~afa.errors.EOutOfBounds`.
 
         Raises :class:`~afa.errors.ConfigError` (``file:line: message``) for an
-        unreadable or malformed file, a DTD or entity, an unknown frame, an inconsistent
+        unreadable, oversized or malformed file, a DTD or entity, a number out of range
+        (translations within ±10 km, angles within ±360 degrees), more bodies, frames or
+        constraints than the limits (:data:`MAX_BODIES` ...), an unknown frame, an inconsistent
         cycle (one line per constraint) or, if required, a disconnected model.
         """
         path = Path(assembly_path)
-        root = _read_xml(path, "assembly", f"{path}:0")
+        budget = _Budget()
+        root = _read_xml(path, "assembly", f"{path}:0", budget)
         _check_attributes(path, root, ("name", "version", "reference", "ground"))
         _check_version(path, root)
 
@@ -348,10 +388,14 @@ class GeometryModel:
         references: dict[str, str] = {}
         cache: dict[Path, _BodyFile] = {}
         constraint_elements: list[etree._Element] = []
+        node_count = 0
         for element in root:
             if element.tag == "description":
                 continue
             if element.tag == "constraint":
+                if len(constraint_elements) == MAX_CONSTRAINTS:
+                    raise ConfigError(f"{path}:{element.sourceline}: more than "
+                                      f"{MAX_CONSTRAINTS} constraints (the limit)")
                 constraint_elements.append(element)
                 continue
             if element.tag != "body":
@@ -368,8 +412,14 @@ class GeometryModel:
             body_lines[body] = line
             file = (path.parent / element.get("file", "").strip()).resolve()
             if file not in cache:
-                cache[file] = _read_body_file(file, f"{path}:{line}: body {body!r}")
+                cache[file] = _read_body_file(file, f"{path}:{line}: body {body!r}", budget)
             decl = cache[file]
+            node_count += len(decl.frames)
+            if len(body_lines) > MAX_BODIES:
+                raise ConfigError(f"{path}:{line}: more than {MAX_BODIES} bodies (the limit)")
+            if node_count > MAX_FRAMES:
+                raise ConfigError(f"{path}:{line}: the bodies so far have more than "
+                                  f"{MAX_FRAMES} frames in all (the limit)")
             body_types[body] = decl.type
             references[body] = decl.reference
             frames[body] = [frame.name for frame in decl.frames]

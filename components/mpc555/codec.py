@@ -645,14 +645,14 @@ class _FrameDecoder(StreamDecoder[Packet[M]]):
         if size < total:
             return Scan.need_more()
         end = HEADER_SIZE + length
-        if crc16_ccitt_false(memoryview(buffer)[:end]) != int.from_bytes(buffer[end:total],
-                                                                           "big"):
+        frame = bytes(buffer[:total])
+        if crc16_ccitt_false(frame[:end]) != int.from_bytes(frame[end:], "big"):
             return Scan.skip(_next_sync(buffer), Fault.CHECKSUM)
         try:
-            message = cls.from_payload(bytes(buffer[HEADER_SIZE:end]))
+            message = cls.from_payload(frame[HEADER_SIZE:end])
         except (ValueError, struct.error):
             return Scan.skip(_next_sync(buffer), Fault.MALFORMED)
-        return Scan.frame(total, Packet(buffer[4], message))
+        return Scan.frame(total, Packet(frame[4], message))
 
 
 class Mpc555Decoder(_FrameDecoder[Report]):

@@ -41,7 +41,7 @@ import numpy as np
 
 from afa.clock import Clock, TimerHandle
 from afa.errors import EDevIO
-from afa.fake import FakeDevice
+from afa.fake import FakeDevice, RecentLog
 from afa.tasks import spawn
 from afa.transport import ByteStream, MemoryByteStream
 from components.mpc555.codec import (
@@ -216,14 +216,23 @@ def _i16(value: float) -> int:
 
 
 class _RecordingDecoder(Mpc555DeviceDecoder):
-    def __init__(self, sink: bytearray | None) -> None:
+    """The command decoder of one connection: records the bytes (if asked) and counts
+    the frames it drops into the controller's one ``rx_errors`` counter."""
+
+    def __init__(self, sink: bytearray | None, errors: Callable[[int], None]) -> None:
         super().__init__()
         self._sink = sink
+        self._errors = errors
 
     def feed(self, data: bytes) -> list[Packet[Command]]:
         if self._sink is not None:
             self._sink += data
-        return super().feed(data)
+        before = self.stats.checksum_failures + self.stats.malformed
+        packets = super().feed(data)
+        dropped = self.stats.checksum_failures + self.stats.malformed - before
+        if dropped:
+            self._errors(dropped)
+        return packets
 
 
 @dataclass
@@ -246,15 +255,19 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
     ``track``, metres, from ``docs/geometry.md``). ``mm_per_count``: the encoders' true
     wheel travel per count. ``rng`` with ``speed_noise`` (m/s) and ``steering_noise``
     (rad): Gaussian noise on the SPEED report's measurements. ``record``: keep every
-    byte sent (``device_bytes``) and received (``host_bytes``).
+    byte sent (``device_bytes``) and received (``host_bytes``); for tests, as it grows
+    with the run (about 1 kB/s).
 
     Test controls: :attr:`estop`, :attr:`faults`, :attr:`mute_acks`, :meth:`inject`,
-    :meth:`corrupt_next`, :meth:`reset`. Observations: :attr:`received` (commands with
-    their arrival times), :attr:`truth`, :attr:`last_wheel_truth`, :attr:`mode`,
-    :attr:`flags`.
+    :meth:`corrupt_next`, :meth:`reset`. Observations: :attr:`received` (the latest
+    :attr:`received_history` commands with their arrival times; ``received.total``
+    counts all), :attr:`truth`, :attr:`last_wheel_truth`, :attr:`mode`, :attr:`flags`.
     """
 
     name = "mpc555"
+    #: How many of the latest commands :attr:`received` keeps (about a minute of the
+    #: 20 Hz command stream a driving host sends).
+    received_history = 1024
 
     def __init__(self, clock: Clock, *, plant: Plant | None = None, wheelbase: float = 1.9,
                  track: float = 1.3, mm_per_count: float = WHEEL_DISTANCE_PER_COUNT,
@@ -268,14 +281,14 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
         self.steering_noise = steering_noise
         self.host_bytes: bytearray | None = bytearray() if record else None
         self.device_bytes: bytearray | None = bytearray() if record else None
-        self.received: list[ReceivedCommand] = []
+        self.received: RecentLog[ReceivedCommand] = RecentLog(self.received_history)
         self.mute_acks = False
         self.watchdog_trips = 0
         self.resets = 0
         self._estop = False
         self._faults = Faults(0)
         self._connections: list[ByteStream] = []
-        self._decoders: list[Mpc555DeviceDecoder] = []
+        self._rx_errors = 0  # host frames dropped, all connections
         self._timers: dict[str, TimerHandle] = {}
         self._corrupt = 0
         self._powered = False
@@ -383,9 +396,10 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
 
     # -- connections ---------------------------------------------------------------------
     def command_decoder(self) -> Mpc555DeviceDecoder:
-        decoder = _RecordingDecoder(self.host_bytes)
-        self._decoders.append(decoder)
-        return decoder
+        return _RecordingDecoder(self.host_bytes, self._count_rx_errors)
+
+    def _count_rx_errors(self, count: int) -> None:
+        self._rx_errors += count
 
     async def produce(self, stream: ByteStream) -> None:
         self._connections.append(stream)
@@ -507,7 +521,7 @@ class FakeMpc555(FakeDevice[Packet[Command]]):
         now = self.clock.monotonic()
         age = 65535 if self._last_host_frame is None else min(
             65535, round((now - self._last_host_frame) * 1000.0))
-        errors = sum(d.stats.checksum_failures + d.stats.malformed for d in self._decoders)
+        errors = self._rx_errors
         self._announced = (self.mode, self.flags, self.faults)
         self._send_report(StatusReport(self._time_ms(), self.mode, self.flags, self.faults,
                                        age, errors & 0xFFFF))

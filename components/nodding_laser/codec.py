@@ -599,37 +599,54 @@ class SickTelegramDecoder(StreamDecoder[SickMessage]):
     SICK framing has no header check: a false STX with a plausible LEN makes the decoder
     wait for that many bytes before the CRC rejects it, so in a live stream a corrupted
     byte costs latency (up to one telegram), never a frame.
-    """
 
-    _STARTS = (STX, ACK, NAK)
+    ACK (0x06) and NAK (0x15) are single bytes the LMS sends between telegrams, in answer
+    to a command. A byte 0x06 or 0x15 is decoded as :class:`SickAck` only where one can
+    stand: at a telegram boundary while the decoder is in sync, that is at the start of
+    the stream (or after :meth:`reset`), right after a telegram whose CRC checked, or
+    right after another ACK/NAK. Once any byte has been skipped (garbage, a CRC failure,
+    a bad LEN) the decoder is resynchronising: 0x06 and 0x15 are data, and only STX can
+    start a frame, until a telegram passes its CRC. So noise yields no ACK/NAK (only a
+    run of them at the very start of a stream could be taken for answers), while an ACK
+    lost in damaged data costs nothing the reply telegram behind it does not carry.
+    """
 
     def __init__(self, *, range_bits: int = 13, max_buffer: int = 1 << 16) -> None:
         super().__init__(max_buffer=max_buffer)
         self.range_bits = range_bits
+        self._in_sync = True
 
-    def _next_start(self, buffer: bytearray, after: int) -> int:
-        positions = [p for p in (buffer.find(b, after) for b in self._STARTS) if p >= 0]
-        return min(positions) if positions else len(buffer)
+    def reset(self) -> None:
+        super().reset()
+        self._in_sync = True
+
+    def _skip(self, buffer: bytearray, fault: Fault) -> Scan[SickMessage]:
+        """Drop the front up to the next STX and resynchronise."""
+        self._in_sync = False
+        position = buffer.find(STX, 1)
+        return Scan.skip(position if position > 0 else len(buffer), fault)
 
     def scan(self, buffer: bytearray) -> Scan[SickMessage]:
         first = buffer[0]
-        if first == ACK or first == NAK:
+        if (first == ACK or first == NAK) and self._in_sync:
             return Scan.frame(1, SickAck(first == ACK))
         if first != STX:
-            return Scan.skip(self._next_start(buffer, 1), Fault.GARBAGE)
+            return self._skip(buffer, Fault.GARBAGE)
         if len(buffer) < _HEADER:
             return Scan.need_more()
         (length,) = struct.unpack_from("<H", buffer, 2)
         if length == 0 or length > MAX_TELEGRAM_LENGTH:
-            return Scan.skip(self._next_start(buffer, 1), Fault.MALFORMED)
+            return self._skip(buffer, Fault.MALFORMED)
         total = _HEADER + length + _TRAILER
         if len(buffer) < total:
             return Scan.need_more()
-        (crc,) = struct.unpack_from("<H", buffer, _HEADER + length)
-        if crc != sick_crc16(memoryview(buffer)[: _HEADER + length]):
-            return Scan.skip(self._next_start(buffer, 1), Fault.CHECKSUM)
+        frame = bytes(buffer[:total])
+        (crc,) = struct.unpack_from("<H", frame, _HEADER + length)
+        if crc != sick_crc16(frame[: _HEADER + length]):
+            return self._skip(buffer, Fault.CHECKSUM)
+        self._in_sync = True  # the CRC checked: this is a telegram boundary
         try:
-            telegram = _split_telegram(buffer[:total])
+            telegram = _split_telegram(frame)
             return Scan.frame(total, telegram_to_message(telegram,
                                                          range_bits=self.range_bits))
         except (EOutOfBounds, struct.error):
@@ -948,17 +965,18 @@ class _FrameScanner:
             return Scan.need_more(), 0, 0, 0, b""
         _, version, frame_type, seq, _, length = struct.unpack_from(_HEADER_FORMAT, buffer)
         (header_crc,) = struct.unpack_from("<H", buffer, 8)
-        if header_crc != controller_crc16(memoryview(buffer)[:8]):
+        if header_crc != controller_crc16(buffer[:8]):
             return Scan.skip(cls.next_sync(buffer, 1), Fault.CHECKSUM), 0, 0, 0, b""
         if version != CONTROLLER_VERSION or length > CONTROLLER_MAX_PAYLOAD:
             return Scan.skip(cls.next_sync(buffer, 1), Fault.MALFORMED), 0, 0, 0, b""
         total = CONTROLLER_HEADER_SIZE + length + 2
         if len(buffer) < total:
             return Scan.need_more(), 0, 0, 0, b""
-        (crc,) = struct.unpack_from("<H", buffer, total - 2)
-        if crc != controller_crc16(memoryview(buffer)[: total - 2]):
+        frame = bytes(buffer[:total])
+        (crc,) = struct.unpack_from("<H", frame, total - 2)
+        if crc != controller_crc16(frame[: total - 2]):
             return Scan.skip(cls.next_sync(buffer, 1), Fault.CHECKSUM), 0, 0, 0, b""
-        return None, frame_type, seq, total, bytes(buffer[CONTROLLER_HEADER_SIZE:total - 2])
+        return None, frame_type, seq, total, frame[CONTROLLER_HEADER_SIZE:total - 2]
 
 
 class NodControllerDecoder(StreamDecoder[ControllerMessage]):

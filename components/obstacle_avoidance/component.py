@@ -9,7 +9,8 @@ body) along every candidate arc in ``CurveMakingConst`` steps between the ``Near
 built once per map geometry), vetoes arcs that meet a hazard, votes by the free distance
 along each arc and publishes an ``ArcVote`` (behaviour ``ObstacleAvoidance``). Where the
 ego map frame sits on the vehicle comes from ModelServer (``getTransformation`` of the
-map's frame), once.
+map's frame), once; maps in a frame ModelServer does not know are ignored, and the
+component reports itself unhealthy.
 """
 
 from __future__ import annotations
@@ -77,6 +78,8 @@ class ObstacleAvoidance(SubscribePublishServer[ObstacleAvoidanceParameters]):
                              "are ignored", self.name, frame, exc)
             self.sweepers[frame] = None
             self.counters["unknown_frames"] += 1
+            self.set_health(False, f"maps in frame {frame!r} are ignored: ModelServer does "
+                                   "not know the frame")
             return None
         except AfaError:
             self.counters["no_geometry"] += 1  # not reachable yet: the next map asks again

@@ -8,7 +8,8 @@ below ``SafetyDepth`` (:mod:`components.obstacle_detection.detect`) and publishe
 result as an ``ArcVote`` (behaviour ``ObstacleDetection``): a halt (every arc vetoed) at
 ``NumHitsTolerance`` hits, then nothing for ``ResetCounter`` scans, else a clear vote.
 The halt is published in the handler of the scan that showed the obstacle, so it reaches
-the arbiter, and through it the vehicle, within that scan period.
+the arbiter, and through it the vehicle, within that scan period. Scans in a frame
+ModelServer does not know are ignored, and the component reports itself unhealthy.
 """
 
 from __future__ import annotations
@@ -87,6 +88,9 @@ class ObstacleDetection(SubscribePublishServer[ObstacleDetectionParameters]):
                              "ignored", self.name, frame, exc)
             self._frames[frame] = None
             self.counters["unknown_frames"] += 1
+            # a safety catch blind to a laser is not healthy, whatever the others see
+            self.set_health(False, f"scans in frame {frame!r} are ignored: ModelServer "
+                                   "does not know the frame")
             return None
         except AfaError:
             self.counters["no_geometry"] += 1  # not bound yet, or timed out: ask again later

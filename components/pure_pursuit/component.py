@@ -122,7 +122,11 @@ class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
         return self.group.model_copy(update={"patrolMode": self.core.patrol})
 
     async def getCurrentWaypoint(self) -> WaypointIDL | None:
-        if self.core.current_waypoint is None or not self.group.waypoints:
+        if not self.group.waypoints:
+            return None
+        if self._origin is None:  # no pose yet to place the list: the first is sought
+            return self.group.waypoints[0]
+        if self.core.current_waypoint is None:
             return None
         return self.group.waypoints[self.core.target]
 

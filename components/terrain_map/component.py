@@ -91,7 +91,7 @@ PENDING_LIMIT = 0.5
 #: Poses kept for placing scans (ModelServer publishes ~14 a second: ~18 s).
 POSE_BUFFER = 256
 #: Time constant (s) with which the stabilised vehicle height follows the pose's.
-HEIGHT_TIME = 30.0
+HEIGHT_TIME = 600.0
 _LASER = (Range3dSeqEventIDL, Range3dLaserIDL)
 _STEREO = (Range3dArrayEventIDL, Range3dStereoEventIDL)
 _RangeEvent = Range3dSeqEventIDL | Range3dLaserIDL | Range3dArrayEventIDL | Range3dStereoEventIDL

@@ -141,6 +141,20 @@ def test_votes_go_stale_after_stale_vote_time():
     assert a.decide(12.1).index == 4  # a new vote brings it back
 
 
+def test_expires_is_when_the_oldest_vote_in_the_book_goes_stale():
+    a = arbiter(StaleVoteTimeSec=1, StaleVoteTimeUSec=500000)
+    assert a.expires() is None
+    a.receive(vote("PurePursuit", peak=3), 10.0)
+    a.receive(vote("ObstacleAvoidance", peak=3), 10.4)
+    expiry = a.expires()
+    assert expiry is not None and 11.5 < expiry <= 11.5 + 1e-5
+    assert a.decide(11.5).fresh == ("ObstacleAvoidance", "PurePursuit")
+    assert a.decide(expiry).fresh == ("ObstacleAvoidance",)  # stale exactly then
+    assert a.expires() == pytest.approx(11.9, abs=1e-5)
+    a.decide(12.0)
+    assert a.expires() is None
+
+
 def test_stale_time_combines_seconds_and_microseconds():
     a = arbiter(StaleVoteTimeSec=0, StaleVoteTimeUSec=200000)
     assert a.stale_after == 0.2
