@@ -530,6 +530,28 @@ def _summary(system: Any, clock_start: float, wall_start: float) -> dict[str, An
     }
 
 
+def _maps_line(maps: dict[str, Any]) -> str:
+    """The summary's ``maps`` section in one line."""
+    parts = []
+    terrain, hazards = maps.get("terrain"), maps.get("hazards")
+    for name, part in (("terrain", terrain), ("hazards", hazards)):
+        if part and "error" in part:
+            parts.append(f"{name}: {part['error']}")
+    terrain = None if terrain is None or "error" in terrain else terrain
+    hazards = None if hazards is None or "error" in hazards else hazards
+    if terrain:
+        parts.append(f"terrain RMS height error {terrain['rms_height_error_m']} m "
+                     f"({terrain['rms_height_error_centred_m']} m about its offset of "
+                     f"{terrain['height_offset_m']} m)")
+    if hazards:
+        parts.append(f"obstacle cells within {maps['detection_range_m']:g} m of the track "
+                     f"detected {hazards['detected_cells']}/{hazards['obstacle_cells']} "
+                     f"({hazards['unobserved_obstacle_cells']} never seen), false hazards "
+                     f"{hazards['false_hazard_cells']}/{hazards['free_observed_cells']} "
+                     "observed free cells")
+    return "maps: " + ("; ".join(parts) if parts else "none built")
+
+
 def _print_summary(summary: dict[str, Any]) -> None:
     events = sum(summary["events"].values())
     if "world" in summary:
@@ -548,6 +570,8 @@ def _print_summary(summary: dict[str, Any]) -> None:
                  if ratio is not None else "")
               + f"; least clearance {summary['clearance_m']} m, {summary['halts']} halt(s), "
               f"{summary['oscillation_per_min']} steering reversals/min")
+    if summary.get("maps"):
+        print(_maps_line(summary["maps"]))
     print(f"ran {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s wall; "
           f"{events} events, {summary['events_dropped']} dropped; "
           f"{len(summary['component_errors'])} component(s) with errors")

@@ -27,6 +27,7 @@ import asyncio
 import hashlib
 import logging
 import math
+from collections import deque
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -45,6 +46,7 @@ from afa.sim.world import World, load_world
 from afa.tasks import spawn
 from afa.transport import AsyncioByteStream, DeviceFactory, PtyDeviceStream, open_tcp
 from components.gps_sokkia.codec import latlon_to_utm
+from components.map_quality import map_summary
 from components.model_server.geometry import GeometryModel
 from components.waypoints import to_local
 from idl import (
@@ -80,6 +82,10 @@ JOYSTICK_PERIOD = 0.1
 #: Steering commands within this angle of straight ahead (rad, 1 degree) count as
 #: straight when oscillation (sign changes of the commanded steering) is counted.
 STEERING_DEADBAND = math.radians(1.0)
+#: The vehicle's track (``RaptorSimulation.track``): a point every TRACK_STEP metres
+#: driven, at most TRACK_POINTS of them (the latest).
+TRACK_STEP = 0.5
+TRACK_POINTS = 100_000
 
 F = TypeVar("F")
 
@@ -226,6 +232,9 @@ class RaptorSimulation:
         self._start = 0.0
         self._command = (0.0, 0.0, True)  # translation m/s, steering rad, brake
         self.collisions: list[dict[str, Any]] = []
+        #: (east, north) of the rear axle every TRACK_STEP m driven
+        self.track: deque[tuple[float, float]] = deque(maxlen=TRACK_POINTS)
+        self._track_next = 0.0
         self.waypoints_reached = 0
         self._next_waypoint = 0
         self._digest = hashlib.sha256()
@@ -394,6 +403,9 @@ class RaptorSimulation:
             speed = 0.0 if brake else translation
             before = self.vehicle.collision
             self.vehicle.step(PHYSICS_STEP, speed, math.degrees(steering), self.terrain)
+            if self.state.distance >= self._track_next:
+                self.track.append((self.state.east, self.state.north))
+                self._track_next = self.state.distance + TRACK_STEP
             collision = self.vehicle.collision
             if collision is not None and before is None:
                 record = {"time": round(self.sim_time, 3), "east": round(collision.east, 3),
@@ -623,6 +635,7 @@ class RaptorSimulation:
             if mission_minutes > 0 else None,
             "pose_error": pose_error,
             "event_digest": self._digest.hexdigest(),
+            "maps": map_summary(self._system, self) if self._system is not None else None,
             "vehicle": {"east": round(self.state.east, 3), "north": round(self.state.north, 3),
                         "heading_deg": round(self.state.heading_deg, 2),
                         "speed": round(self.state.speed, 3)},

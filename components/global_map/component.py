@@ -14,6 +14,14 @@
 - Keeps the waypoint list (set as Pure Pursuit's is) and the current waypoint: it
   advances when the vehicle position of a traversability map comes within the
   waypoint's tolerance, and wraps in patrol mode.
+- Bad input is counted in ``statistics()``, not merged, and makes the component
+  unhealthy until a map is accepted ``BAD_INPUT_WINDOW`` seconds later (its detail naming
+  it, :mod:`components.bad_input`): a map stamped more than ``FUTURE_TOLERANCE`` ahead
+  of the clock (``future_maps``: merged, its stamp would make every later observation
+  of its cells look older than it, so none could ever replace it), and a map coarser
+  than the planning grid (``grid_mismatch``: each of its cells would reach only the one
+  planning cell holding its centre, leaving the others free for the planner; an equal
+  or finer map is merged, several cells into one at their highest hazard).
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ import numpy as np
 
 from afa import Event, SubscribePublishServer
 from afa.errors import EOutOfBounds
+from components.bad_input import BAD_INPUT_WINDOW, FUTURE_TOLERANCE, BadInputLog
 from components.global_map.accumulate import CostMapping, PlanningGrid, Region
 from components.global_map.parameters import GlobalMapParameters
 from components.waypoints import to_local
@@ -69,8 +78,13 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
         self.vehicle: Position3DIDL | None = None
         self.heading = 0.0
         self._whole_map: PlanMapEventIDL | None = None
+        self.bad_input = BadInputLog(BAD_INPUT_WINDOW)
         self.counters = {"maps_merged": 0, "cells_changed": 0, "plan_maps_published": 0,
-                         "waypoints_reached": 0, "cells_outside": 0}
+                         "waypoints_reached": 0, "cells_outside": 0, "future_maps": 0,
+                         "grid_mismatch": 0}
+
+    async def setup(self) -> None:
+        self.bad_input.clear()
 
     def _new_grid(self) -> PlanningGrid:
         p = self.parameters
@@ -82,8 +96,27 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
         return PlanningBoundaryIDL(minX=0, minY=0, maxX=rows - 1, maxY=cols - 1)
 
     # -- merging ---------------------------------------------------------------------------
+    def _bad(self, counter: str, what: str) -> None:
+        self.counters[counter] += 1
+        self.bad_input.note(what, self.clock.monotonic())
+        self._update_health()
+
+    def _update_health(self) -> None:
+        problems = self.bad_input.recent(self.clock.monotonic())
+        self.set_health(not problems, "; ".join(problems))
+
     def _on_map(self, event: Event) -> None:
         body: TravMapArrayEventIDL = event.body  # type: ignore[assignment]
+        if body.time.to_seconds() > self.clock.now() + FUTURE_TOLERANCE:
+            self._bad("future_maps", f"{event.type} maps stamped in the future (ignored)")
+            return
+        planning = self.grid.geometry.gridsize
+        if body.gridsize > planning * (1.0 + 1e-9):
+            self._bad("grid_mismatch", f"{event.type} maps with {body.gridsize:g} m cells, "
+                                       f"coarser than the planning grid's {planning:g} m "
+                                       "(ignored)")
+            return
+        self._update_health()
         if self.initial_utm is None or not np.array_equal(body.initialUTM, self.initial_utm):
             if self.initial_utm is not None:
                 self.log.warning("%s: the world frame's origin moved: the map starts again",

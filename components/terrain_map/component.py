@@ -14,6 +14,15 @@
   not fused. Invalid poses (``poseValidFlag`` false) are counted and not used. Stereo
   frames are decimated so that they add no more points than the lasers gave in
   ``StereoPeriod`` (:class:`~components.terrain_map.grid.StereoBalance`).
+- Bad input (:mod:`components.bad_input`) is counted in ``statistics()`` and makes the
+  component unhealthy for ``BAD_INPUT_WINDOW`` seconds, its detail naming what was
+  refused: non-finite points (dropped; the scan's finite points are fused), a scan in a
+  frame ModelServer does not know, a scan older than the pose buffer, a scan in a pose
+  jump, a scan no pose came for within ``PENDING_LIMIT``, a malformed scan or pose (one
+  that bypassed the IDL's validation), a pose stamped in the future. It is unhealthy
+  as long as the latest pose is marked invalid, and as long as ModelServer does not
+  know the ground frame. Scans that arrive before the map's first pose (at start, or
+  after the pose frame's origin moved) are routine: counted as ``before_pose``.
 - Vertical stabilisation: a 2.5-D map stitches scans taken seconds apart, so the
   vehicle's height must be consistent over seconds, which a GPS elevation (0.3 m of
   correlated noise for the Raptor's RT-20) is not: scans of flat ground would pile up
@@ -46,6 +55,7 @@ import numpy as np
 from afa import EOutOfBounds, Event, SubscribePublishServer
 from afa.clock import TIME_TOLERANCE
 from afa.errors import AfaError, EDevIO
+from components.bad_input import BAD_INPUT_WINDOW, FUTURE_TOLERANCE, BadInputLog
 from components.terrain_map.grid import (
     EgoView,
     PoseAudit,
@@ -158,16 +168,23 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
         self.pose: PoseTransformIDL | None = None
         self._pending: deque[tuple[float, Event]] = deque()
         self._filling_since = 0.0
+        self._first_pose: float | None = None  # stamp of the first pose since a reset
+        self._pose_invalid = False
+        self.bad_input = BadInputLog(BAD_INPUT_WINDOW)
         self.counters = {"scans": 0, "points_fused": 0, "points_outside": 0,
                          "points_nonfinite": 0, "invalid_poses": 0, "too_old": 0,
                          "future_dropped": 0, "implausible": 0, "unknown_frames": 0,
-                         "maps_published": 0, "resets": 0}
+                         "no_geometry": 0, "malformed_scans": 0, "malformed_poses": 0,
+                         "future_poses": 0, "before_pose": 0, "maps_published": 0,
+                         "resets": 0}
 
     async def setup(self) -> None:
         self.latest_map = self.slot("terrain map")
         self.latest_ego = self.slot("egocentric terrain map")
         self.latest_seq = self.slot("terrain map (sequence)")
         self.latest_ego_seq = self.slot("egocentric terrain map (sequence)")
+        self._pose_invalid = False
+        self.bad_input.clear()
         self._reset()
 
     async def run(self) -> None:
@@ -175,18 +192,52 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
         p = self.parameters
         for text in (p.GroundFrame, p.SickLaserFrame1, p.SickLaserFrame2, p.DigiclopsFrame):
             await self._transform(frame_name(text))
-        if self.frames.get(self.ground_frame) is None:
-            self.set_health(False, f"ModelServer does not know the ground frame "
-                                   f"{self.ground_frame}: no ego map")
+        self._update_health()
         async for _ in self.clock.periodic(p.MapEventInterval):
+            self._expire_pending()
+            self._update_health()
             self._publish()
+
+    # -- health ------------------------------------------------------------------------------
+    def _bad(self, counter: str, what: str, count: int = 1) -> None:
+        """Count ``count`` refused inputs under ``counter`` and note ``what`` for health."""
+        self.counters[counter] += count
+        self.bad_input.note(what, self.clock.monotonic())
+        self._update_health()
+
+    def _update_health(self) -> None:
+        problems = []
+        if self.ground_frame in self.frames and self.frames[self.ground_frame] is None:
+            problems.append(f"ModelServer does not know the ground frame "
+                            f"{self.ground_frame}: no ego map")
+        if self._pose_invalid:
+            problems.append("the latest pose is marked invalid (poseValidFlag false): "
+                            "scans wait for a valid one")
+        problems += self.bad_input.recent(self.clock.monotonic())
+        self.set_health(not problems, "; ".join(problems))
 
     # -- inputs -----------------------------------------------------------------------------
     def _on_pose(self, event: Event) -> None:
         pose: PoseTransformIDL = event.body  # type: ignore[assignment]
+        transform = np.asarray(pose.HTransform)
+        utm_ok = np.shape(pose.initialUTM) == (3,) and np.all(np.isfinite(pose.initialUTM))
+        if transform.shape != (4, 4) or not np.all(np.isfinite(transform)) or not utm_ok:
+            self._bad("malformed_poses", f"malformed poses on {event.type} (ignored)")
+            return
+        stamp = pose.time.to_seconds()
+        if stamp > self.clock.now() + FUTURE_TOLERANCE:
+            self._bad("future_poses", f"poses on {event.type} stamped in the future "
+                                      "(ignored)")
+            return
         if not pose.poseValidFlag:
             self.counters["invalid_poses"] += 1
+            if not self._pose_invalid:
+                self._pose_invalid = True
+                self._update_health()
             return
+        if self._pose_invalid:
+            self._pose_invalid = False
+            self._update_health()
         utm = pose.initialUTM
         if self.initial_utm is None or not np.array_equal(utm, self.initial_utm):
             if self.initial_utm is not None:
@@ -194,7 +245,8 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
                                  "starts again", self.name)
             self.initial_utm = np.array(utm)
             self._reset()
-        stamp = pose.time.to_seconds()
+        if self._first_pose is None:
+            self._first_pose = stamp
         self.stable = self.heights(stamp, pose.HTransform)
         self.poses.add(stamp, self.stable)  # audited (and counted) there
         self.pose = pose
@@ -206,9 +258,21 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
 
     async def _on_scan(self, event: Event) -> None:
         scan: _RangeEvent = event.body  # type: ignore[assignment]
+        points = np.asarray(scan.points)
+        valid = getattr(scan, "valid", None)  # the static-array forms' flags
+        if (points.ndim < 2 or points.shape[-1] != 3 or not isinstance(scan.frame, str)
+                or (valid is not None and np.shape(valid) != points.shape[:-1])):
+            self._bad("malformed_scans", f"malformed {event.type} scans (ignored)")
+            return
         transform = await self._transform(scan.frame)
         if transform is None:
-            self.counters["unknown_frames"] += 1
+            if frame_name(scan.frame) in self.frames:
+                self._bad("unknown_frames", f"{event.type} scans in frame "
+                                            f"{frame_name(scan.frame)!r}, which ModelServer "
+                                            "does not know (ignored)")
+            else:
+                self._bad("no_geometry", f"{event.type} scans while ModelServer could not "
+                                         "be asked for their frame (ignored)")
             return
         self._place(event, transform)
 
@@ -220,10 +284,15 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
             self._pending.append((self.clock.monotonic(), event))
             return
         if found.status is PoseStatus.TOO_OLD:
-            self.counters["too_old"] += 1
+            if self._first_pose is not None and stamp < self._first_pose:
+                self.counters["before_pose"] += 1  # the map started after this scan
+            else:
+                self._bad("too_old", f"{event.type} scans older than the pose buffer "
+                                     "(dropped)")
             return
         if found.status is PoseStatus.IMPLAUSIBLE:
-            self.counters["implausible"] += 1
+            self._bad("implausible", f"{event.type} scans during a pose jump the vehicle "
+                                     "cannot make (not fused)")
             return
         assert found.transform is not None
         points = scan.valid_points()
@@ -235,18 +304,30 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
         self.counters["scans"] += 1
         self.counters["points_fused"] += stats.fused
         self.counters["points_outside"] += stats.outside
-        self.counters["points_nonfinite"] += stats.nonfinite
+        if stats.nonfinite:
+            self._bad("points_nonfinite", f"non-finite points in {event.type} scans "
+                                          "(dropped)", stats.nonfinite)
 
     def _retry_pending(self) -> None:
         now = self.clock.monotonic()
         pending, self._pending = self._pending, deque()
         for queued, event in pending:
             if now - queued > PENDING_LIMIT:
-                self.counters["future_dropped"] += 1
+                self._drop_late(event)
                 continue
-            transform = self.frames.get(event.body.frame)  # type: ignore[attr-defined]
+            transform = self.frames.get(frame_name(event.body.frame))  # type: ignore[attr-defined]
             if transform is not None:
                 self._place(event, transform)
+
+    def _expire_pending(self) -> None:
+        """Drop scans no pose has come for within PENDING_LIMIT (poses stopped)."""
+        now = self.clock.monotonic()
+        while self._pending and now - self._pending[0][0] > PENDING_LIMIT:
+            self._drop_late(self._pending.popleft()[1])
+
+    def _drop_late(self, event: Event) -> None:
+        self._bad("future_dropped", f"{event.type} scans no pose came for within "
+                                    f"{PENDING_LIMIT:g} s (dropped)")
 
     async def _transform(self, frame: str) -> np.ndarray | None:
         """^V T_frame from ModelServer, polled once per frame (None if unknown)."""
@@ -269,7 +350,9 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
         self.grid.reset()
         self.poses = PoseBuffer(POSE_BUFFER, self.poses.audit)
         self.heights.reset()
+        self.counters["before_pose"] += len(self._pending)
         self._pending.clear()
+        self._first_pose = None
         self._filling_since = self.clock.monotonic()
         self.counters["resets"] += 1
 

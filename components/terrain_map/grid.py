@@ -232,24 +232,26 @@ def _transform(t: FloatArray, points: NDArray[Any], *, columns: bool,
                result: FloatArray | None = None, scratch: FloatArray | None = None
                ) -> FloatArray:
     """transform_points' arithmetic; the column path writes into ``result`` (3, n) and
-    ``scratch`` (n,) when given (float64 ``points`` expected there)."""
+    ``scratch`` (n,) when given (float64 ``points`` expected there). Non-finite points
+    give non-finite results without a warning (``inf · 0`` is NaN): fusion drops them."""
     p = points.astype(np.float64, copy=False)
-    if not columns:
-        out: FloatArray = p @ np.ascontiguousarray(t[:3, :3].T)
-        out += t[:3, 3]
-        return out
-    n = p.shape[0]
-    if result is None or scratch is None:
-        result, scratch = np.empty((3, n)), np.empty(n)
-    x, y, z = p[:, 0], p[:, 1], p[:, 2]
-    for r in range(3):
-        row = result[r]
-        np.multiply(x, t[r, 0], out=row)
-        np.multiply(y, t[r, 1], out=scratch)
-        row += scratch
-        np.multiply(z, t[r, 2], out=scratch)
-        row += scratch
-        row += t[r, 3]
+    with np.errstate(invalid="ignore", over="ignore"):
+        if not columns:
+            out: FloatArray = p @ np.ascontiguousarray(t[:3, :3].T)
+            out += t[:3, 3]
+            return out
+        n = p.shape[0]
+        if result is None or scratch is None:
+            result, scratch = np.empty((3, n)), np.empty(n)
+        x, y, z = p[:, 0], p[:, 1], p[:, 2]
+        for r in range(3):
+            row = result[r]
+            np.multiply(x, t[r, 0], out=row)
+            np.multiply(y, t[r, 1], out=scratch)
+            row += scratch
+            np.multiply(z, t[r, 2], out=scratch)
+            row += scratch
+            row += t[r, 3]
     transposed: FloatArray = result.T
     return transposed
 

@@ -11,18 +11,26 @@ goodness grids on a coarser grid.
   ``Ego`` suffix, when ``EgoMap``) as EtravMapArrayEventIDL. Unknown cells stay NaN.
 - ``vehiclePosition`` and ``vehicleHeading`` are those of the ego map's frame (the ground
   under the front bumper) at the map's time.
-- A terrain map stamped in the future (more than ``FUTURE_TOLERANCE`` ahead of the clock)
-  is counted and ignored.
+- Bad input is counted in ``statistics()`` and ignored, and makes the component unhealthy
+  for ``BAD_INPUT_WINDOW`` seconds, the health detail naming it
+  (:mod:`components.bad_input`): a terrain map stamped in the future (more than
+  ``FUTURE_TOLERANCE`` ahead of the clock; ``future_maps``), and a terrain map whose cell
+  size is not the one its description (``TerrainMapDescription`` or
+  ``EgoTerrainMapDescription``) names (``grid_mismatch``): the configuration says which
+  terrain map this component reads, and the hazard rules' resampling assumes it (a 1 m
+  terrain grid, for one, fills only one 0.5 m traversability cell in four).
 - Serves TravMap (Table 16) under the global map's event name.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from afa import Event, SubscribePublishServer
 from afa.clock import TIME_TOLERANCE
 from afa.errors import EDevIO
+from components.bad_input import BAD_INPUT_WINDOW, FUTURE_TOLERANCE, BadInputLog
 from components.terrain_map.grid import GridGeometry, TerrainLayers, yaw_of
 from components.traversability_map.hazards import (
     HazardRules,
@@ -30,21 +38,20 @@ from components.traversability_map.hazards import (
     TraversabilityLayers,
     TraversabilityMapper,
 )
-from components.traversability_map.parameters import TraversabilityMapParameters
+from components.traversability_map.parameters import (
+    MapDescription,
+    TraversabilityMapParameters,
+)
 from idl import (
     EgoMapArrayEventIDL,
     EtravMapArrayEventIDL,
     MapArrayEventIDL,
     Position3DIDL,
-    TimeIDL,
     TravMap,
     TravMapArrayEventIDL,
 )
 
 __all__ = ["TraversabilityMap", "FUTURE_TOLERANCE"]
-
-#: A terrain map stamped this far (s) ahead of the clock is refused as from the future.
-FUTURE_TOLERANCE = 1.0
 
 
 class TraversabilityMap(SubscribePublishServer[TraversabilityMapParameters]):
@@ -73,35 +80,54 @@ class TraversabilityMap(SubscribePublishServer[TraversabilityMapParameters]):
         self.terrain: MapArrayEventIDL | None = None
         self.ego_terrain: EgoMapArrayEventIDL | None = None
         self._filling_since = 0.0
-        self.counters = {"terrain_maps": 0, "future_maps": 0, "maps_published": 0}
+        self.bad_input = BadInputLog(BAD_INPUT_WINDOW)
+        self.counters = {"terrain_maps": 0, "future_maps": 0, "grid_mismatch": 0,
+                         "maps_published": 0}
 
     async def setup(self) -> None:
         self.latest_map = self.slot("traversability map")
         self.latest_ego = self.slot("egocentric traversability map")
         self._filling_since = self.clock.monotonic()
+        self.bad_input.clear()
 
     async def run(self) -> None:
         async for _ in self.clock.periodic(self.parameters.MapEventInterval):
+            self._update_health()
             if (self.clock.monotonic() - self._filling_since
                     >= self.parameters.MapUpdateTime - TIME_TOLERANCE):
                 self._publish()
 
-    def _fresh(self, stamp: TimeIDL) -> bool:
-        if stamp.to_seconds() > self.clock.now() + FUTURE_TOLERANCE:
-            self.counters["future_maps"] += 1
+    def _update_health(self) -> None:
+        problems = self.bad_input.recent(self.clock.monotonic())
+        self.set_health(not problems, "; ".join(problems))
+
+    def _bad(self, counter: str, what: str) -> None:
+        self.counters[counter] += 1
+        self.bad_input.note(what, self.clock.monotonic())
+        self._update_health()
+
+    def _accept(self, event: Event, description: MapDescription) -> bool:
+        """Whether a terrain map is fresh and on the grid its description names."""
+        body: MapArrayEventIDL | EgoMapArrayEventIDL = event.body  # type: ignore[assignment]
+        if body.time.to_seconds() > self.clock.now() + FUTURE_TOLERANCE:
+            self._bad("future_maps", f"{event.type} maps stamped in the future (ignored)")
+            return False
+        expected = description.Gridsize / 1000.0
+        if not math.isclose(body.gridsize, expected, rel_tol=1e-9):
+            self._bad("grid_mismatch", f"{event.type} maps with {body.gridsize:g} m cells, "
+                                       f"not the {expected:g} m of their description "
+                                       "(ignored)")
             return False
         self.counters["terrain_maps"] += 1
         return True
 
     def _on_terrain(self, event: Event) -> None:
-        body: MapArrayEventIDL = event.body  # type: ignore[assignment]
-        if self._fresh(body.time):
-            self.terrain = body
+        if self._accept(event, self.parameters.TerrainMapDescription):
+            self.terrain = event.body  # type: ignore[assignment]
 
     def _on_ego_terrain(self, event: Event) -> None:
-        body: EgoMapArrayEventIDL = event.body  # type: ignore[assignment]
-        if self._fresh(body.time):
-            self.ego_terrain = body
+        if self._accept(event, self.parameters.EgoTerrainMapDescription):
+            self.ego_terrain = event.body  # type: ignore[assignment]
 
     def _publish(self) -> None:
         p = self.parameters

@@ -21,6 +21,9 @@ identity, as a map event's ``mapPose``):
 - **Obstacle cells**: coverage ≥ ``obstacle_coverage`` (0.5: cells mostly obstacle)
   and centre within ``detection_range`` (8 m, the laser's reach) of some point of
   the track. **Detected**: hazard ≥ ``hazard_threshold`` (1: untraversable).
+  **Unobserved**: obstacle cells the map holds nothing for (NaN): within reach of the
+  track but never in the sensors' view (behind the start, in another obstacle's
+  shadow); ``detection_fraction_observed`` leaves them out.
 - **Free observed cells**: observed (``observed``, default: hazard not NaN) and no
   obstacle sample in the cell or within ``margin_cells`` cells of it. The margin is a
   don't-care band: the step rule marks both sides of a face, so the ground cell
@@ -29,7 +32,11 @@ identity, as a map event's ``mapPose``):
 - **RMS height error**: over observed terrain cells (count > 0) holding truth samples,
   ``elevation - mean(truth surface samples in the cell)``; ``…_ground`` restricts it to
   cells clear of obstacles by the margin (faces make cell means depend on where the
-  beams happened to land).
+  beams happened to land). ``height_offset`` is the mean error over those ground
+  cells: the level at which the whole map sits above the truth (a map stitched with
+  a vehicle height from GPS floats by decimetres; hazards, which are height
+  differences, do not see it), and ``rms_height_error_centred`` the RMS over all
+  observed cells of the error less that offset: the error in the map's shape.
 
 Fractions are NaN when their denominator is 0.
 """
@@ -94,9 +101,13 @@ class MapQuality:
     observed_terrain_cells: int
     rms_height_error: float
     rms_height_error_ground: float
+    height_offset: float
+    rms_height_error_centred: float
     obstacle_cells: int
     detected_cells: int
     detection_fraction: float
+    unobserved_obstacle_cells: int
+    detection_fraction_observed: float
     free_observed_cells: int
     false_hazard_cells: int
     false_hazard_fraction: float
@@ -190,11 +201,12 @@ def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTru
     with np.errstate(invalid="ignore"):
         hazardous = h >= hazard_threshold
     detected = int(np.count_nonzero(hazardous[targets[:, 0], targets[:, 1]]))
+    unobserved = int(np.count_nonzero(~seen[targets[:, 0], targets[:, 1]]))
     free = seen & (samples > 0) & _clear_of_obstacles(obstacle, margin_cells)
     false = int(np.count_nonzero(free & hazardous))
     n_free = int(np.count_nonzero(free))
 
-    rms = rms_ground = math.nan
+    rms = rms_ground = offset = rms_centred = math.nan
     n_observed = 0
     if terrain_elevation is not None and terrain_count is not None \
             and terrain_geometry is not None:
@@ -216,10 +228,15 @@ def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTru
         error_ground = elevation[ground] - tsum[ground] / tsamples[ground]
         if len(error_ground):
             rms_ground = float(np.sqrt(np.mean(error_ground ** 2)))
+            offset = float(np.mean(error_ground))
+            rms_centred = float(np.sqrt(np.mean((error - offset) ** 2)))
 
     return MapQuality(
         observed_terrain_cells=n_observed, rms_height_error=rms,
-        rms_height_error_ground=rms_ground, obstacle_cells=len(targets),
+        rms_height_error_ground=rms_ground, height_offset=offset,
+        rms_height_error_centred=rms_centred, obstacle_cells=len(targets),
         detected_cells=detected, detection_fraction=_fraction(detected, len(targets)),
+        unobserved_obstacle_cells=unobserved,
+        detection_fraction_observed=_fraction(detected, len(targets) - unobserved),
         free_observed_cells=n_free, false_hazard_cells=false,
         false_hazard_fraction=_fraction(false, n_free))

@@ -186,6 +186,22 @@ def test_fuse_transformed_is_fuse_of_transform_points() -> None:
             assert np.array_equal(getattr(a, name), getattr(b, name)), (n, name)
 
 
+@pytest.mark.parametrize("n", [361, SMALL_BATCH + 1])
+def test_infinite_points_are_dropped_without_a_warning(n: int) -> None:
+    """``inf · 0`` in the rotation is NaN: counted as non-finite, and no RuntimeWarning
+    (pytest turns warnings into errors; a component once failed on one)."""
+    t = pose(0.4, -0.2, 1.9, yaw=2.0, pitch=0.05)
+    pts = np.zeros((n, 3), dtype=np.float32)
+    pts[:, 0] = np.linspace(1.0, 5.0, n)
+    pts[0] = (np.inf, 0.0, 0.0)
+    pts[1] = (0.0, -np.inf, np.inf)
+    pts[2] = (np.nan, 1.0, 1.0)
+    grid = TerrainGrid.centred(0, 0, 16, 16, 0.2)
+    stats = grid.fuse_transformed(pts, t, 1.0)
+    assert (stats.fused, stats.nonfinite) == (n - 3, 3)
+    assert np.all(np.isfinite(grid.sum_z)) and np.all(np.isfinite(grid.sum_z2))
+
+
 def test_floor_semantics_on_exact_edges() -> None:
     geometry = GridGeometry(-2.0, -1.0, 0.25, 16, 8)  # binary-exact edges
     grid = TerrainGrid(geometry)

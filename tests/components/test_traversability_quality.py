@@ -32,6 +32,7 @@ def test_detection_and_false_hazards() -> None:
     q = assess(hazard=hazard_with({(2, 2): 1.0, (1, 2): 1.0, (6, 6): 1.0}),
                hazard_geometry=TRAV, truth=TRUTH, track=[[0.0, 0.0]])
     assert (q.obstacle_cells, q.detected_cells, q.detection_fraction) == (1, 1, 1.0)
+    assert (q.unobserved_obstacle_cells, q.detection_fraction_observed) == (0, 1.0)
     assert q.free_observed_cells == 64 - 9
     assert q.false_hazard_cells == 1  # [6, 6]; [1, 2] lies in the margin
     assert q.false_hazard_fraction == pytest.approx(1 / 55)
@@ -42,6 +43,7 @@ def test_unknown_is_neither_detected_nor_free_and_range_limits_targets() -> None
     h = hazard_with({(2, 2): np.nan, (5, 5): np.nan})
     q = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[1.0, 1.0]])
     assert (q.obstacle_cells, q.detected_cells) == (1, 0)
+    assert q.unobserved_obstacle_cells == 1 and math.isnan(q.detection_fraction_observed)
     assert q.free_observed_cells == 64 - 9 - 1
     far = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[20.0, 20.0]])
     assert far.obstacle_cells == 0 and math.isnan(far.detection_fraction)
@@ -61,6 +63,27 @@ def test_rms_height_error_and_a_rotated_map() -> None:
     assert q.observed_terrain_cells == 399
     assert q.rms_height_error_ground == pytest.approx(0.01)
     assert q.rms_height_error > 0.01
+    assert q.height_offset == pytest.approx(0.01)
+    # the whole map 0.25 m higher: the offset takes it, the centred figure does not move
+    high = assess(hazard=hazard_with({}), hazard_geometry=TRAV, truth=TRUTH, track=[[0, 0]],
+                  terrain_elevation=elevation + 0.25, terrain_count=count,
+                  terrain_geometry=terrain)
+    assert high.height_offset == pytest.approx(0.26)
+    assert high.rms_height_error_ground == pytest.approx(0.26)
+    assert high.rms_height_error_centred == pytest.approx(q.rms_height_error_centred)
+    # cells over the obstacle: 0.5 where the truth means are 0.6 (inside) or partly 0
+    errors = []
+    for i in range(20):
+        for j in range(20):
+            if count[i, j]:
+                x = 0.1 * np.arange(2 * i, 2 * i + 2)  # the 0.1 m truth samples in the cell
+                y = 0.1 * np.arange(2 * j, 2 * j + 2)
+                truth = SURFACE[np.ix_(np.round(y * 10).astype(int),
+                                       np.round(x * 10).astype(int))].mean()
+                errors.append(elevation[i, j] - truth)
+    assert q.rms_height_error == pytest.approx(math.sqrt(np.mean(np.square(errors))))
+    assert q.rms_height_error_centred == pytest.approx(
+        math.sqrt(np.mean(np.square(np.array(errors) - 0.01))))
     # the same trav grid as an ego map rotated by 90 degrees about (4, 0)
     pose = np.eye(4)
     pose[:2, :2] = [[0.0, -1.0], [1.0, 0.0]]
