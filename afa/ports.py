@@ -73,10 +73,11 @@ def interface_name(interface: type[Interface]) -> str:
 class Output(Generic[T]):
     """A declared publication. ``publish`` works while the component runs."""
 
-    __slots__ = ("owner", "name", "type", "enabled", "_publisher")
+    __slots__ = ("owner", "name", "type", "enabled", "published", "_publisher")
 
     def __init__(self, owner: str, name: str, type: type[T], enabled: bool = True) -> None:
         self.owner, self.name, self.type, self.enabled = owner, name, type, enabled
+        self.published = 0  # events published through this port, every life
         self._publisher: Publisher | None = None
 
     @property
@@ -97,6 +98,7 @@ class Output(Generic[T]):
         publisher = self._publisher
         if publisher is None:
             raise ComponentError(f"{self.owner}: {self.name} published while not running")
+        self.published += 1
         return publisher.publish(body, origin=self.owner)
 
     def info(self) -> PortInfo:

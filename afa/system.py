@@ -16,6 +16,11 @@
   :meth:`run` raises :class:`~afa.errors.TaskFailed`, and so does leaving the
   ``async with`` block if nobody has seen it yet.
 - **The catalog** (:meth:`catalog`): every port of every component, from construction.
+- **Services** (:meth:`add_service`): something with ``start(system)`` and ``stop()``
+  that lives as long as the running system, around its components: a bridge to other
+  processes. Started before the components, stopped after them.
+- **Loop-time accounting** (``meter=True``, :mod:`afa.meter`): each component's share of
+  the loop's time, for ``afa top``.
 - **Devices**: ``devices`` maps component names to factories that open a fake device
   or an emulator in place of the real one (a name that is no component is an error);
   ``real_devices=False`` (or the environment variable ``AFA_FORBID_REAL_DEVICES=1``,
@@ -29,12 +34,13 @@ import logging
 import os
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from afa.clock import Clock, WallClock
 from afa.component import Component, Context, Health, PublishServerReactor, RestartPolicy, State
 from afa.errors import ComponentError, StartupError, TaskFailed
 from afa.events import Event, EventChannel, Overflow, Subscription
+from afa.meter import LoopMeter
 from afa.naming import NameRegistry, join_name
 from afa.polling import LocalInvoker, PollLayer, current_caller, proxy_for
 from afa.ports import Catalog
@@ -42,7 +48,7 @@ from afa.tasks import Scope, TaskGroup
 from afa.transport import DeviceFactory, DeviceOpener
 from idl._base import Interface
 
-__all__ = ["System", "Observer", "FORBID_REAL_DEVICES"]
+__all__ = ["System", "Observer", "Service", "FORBID_REAL_DEVICES"]
 
 InterfaceT = TypeVar("InterfaceT", bound=Interface)
 log = logging.getLogger("afa.system")
@@ -53,6 +59,21 @@ FORBID_REAL_DEVICES = "AFA_FORBID_REAL_DEVICES"
 #: ``provider(component)``: a device factory to use in place of ``component``'s real
 #: device, or None (a simulation provides emulators this way).
 DeviceProvider = Callable[[Component[Any]], DeviceFactory | None]
+
+
+class Service(Protocol):
+    """Something that runs as long as a system runs (:meth:`System.add_service`)."""
+
+    name: str
+
+    async def start(self, system: System) -> None:
+        """Called when the system starts, before its components (the task group exists).
+        An exception fails the start (StartupError naming the service)."""
+        ...
+
+    async def stop(self) -> None:
+        """Called when the system stops, after its components; must not raise."""
+        ...
 
 
 class Observer:
@@ -120,8 +141,12 @@ class System:
         start_delays: Mapping[str, float] | None = None,
         base_dir: str | Path | None = None,
         real_devices: bool | None = None,
+        process: str = "main",
+        meter: bool = False,
     ) -> None:
         self.robot = robot
+        self.process = process  # this process's group name (origin prefix across a bridge)
+        self.meter: LoopMeter | None = LoopMeter() if meter else None
         self.clock: Clock = clock or WallClock()
         self.channel = EventChannel(self.clock)
         self.registry = NameRegistry(self.clock)
@@ -143,6 +168,8 @@ class System:
         self._supervisors: dict[str, asyncio.Task[None]] = {}
         self._tasks: TaskGroup | None = None
         self._observers: list[Observer] = []
+        self._services: list[Service] = []
+        self._started_services: list[Service] = []
         self._running = False
         self._stopped = asyncio.Event()
         self._failed = asyncio.Event()
@@ -178,7 +205,8 @@ class System:
             if factory is not None:
                 self.devices.overrides[component.name] = factory
         component._attach(Context(self.robot, self.channel, self.registry, self.clock,
-                                  self.devices, self.base_dir, self.polls, self._section))
+                                  self.devices, self.base_dir, self.polls, self._section,
+                                  self.meter))
         if self._running:
             self._launch(component)
         return component
@@ -188,6 +216,29 @@ class System:
         sections = getattr(self.configuration, "sections", None) or {}
         sets = sections.get(name)
         return None if not sets else next(iter(sets.values()))
+
+    def add_service(self, service: Service) -> Service:
+        """Run ``service`` while the system runs (before start). Raises ComponentError
+        while running."""
+        if self._running:
+            raise ComponentError(f"add the service {service.name} before the system starts")
+        self._services.append(service)
+        return service
+
+    @property
+    def services(self) -> list[Service]:
+        return list(self._services)
+
+    def enable_meter(self) -> LoopMeter:
+        """Turn loop-time accounting on (before start); returns the meter."""
+        if self.meter is None:
+            if self._running:
+                raise ComponentError("turn the meter on before the system starts")
+            self.meter = LoopMeter()
+            for component in self.components.values():
+                if component._context is not None:
+                    component._context.meter = self.meter
+        return self.meter
 
     def catalog(self) -> Catalog:
         """Every declared port of every component (available before start)."""
@@ -218,11 +269,22 @@ class System:
         self._running = True
         self._stopped = asyncio.Event()
         self._failed = asyncio.Event()
-        self._tasks = TaskGroup(f"system {self.robot}", on_failure=self._task_failed)
+        self._tasks = TaskGroup(f"system {self.robot}", on_failure=self._task_failed,
+                                meter=self.meter)
         for observer in self._observers:
             self._tasks.spawn(observer.run(), owner=f"observer {observer.name}")
         self.registry.rebind(join_name(self.robot, "EventChannel"), self.channel, owner=self)
         failures: dict[str, BaseException] = {}
+        for service in self._services:
+            try:
+                await service.start(self)
+            except Exception as exc:
+                failures[service.name] = exc
+                break
+            self._started_services.append(service)
+        if failures:
+            await self.stop(raise_failures=False)
+            raise StartupError(failures)
         for component in list(self.components.values()):
             self._launch(component)
             while component.state in (State.CREATED, State.STARTING):
@@ -245,6 +307,12 @@ class System:
             return
         for name in reversed(list(self._supervisors)):
             await self.stop_component(name)
+        while self._started_services:
+            service = self._started_services.pop()
+            try:
+                await service.stop()
+            except Exception:
+                log.exception("service %s failed to stop", service.name)
         for observer in self._observers:
             observer.close()
         self._observers.clear()
