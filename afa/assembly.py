@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -10,6 +11,7 @@ from afa import registry
 from afa.component import Component, RestartPolicy
 from afa.config.loader import MAIN_PROCESS, Configuration, LauncherEntry, load_configuration
 from afa.errors import AfaError, ConfigError
+from afa.ports import PortInfo
 
 S = TypeVar("S")
 
@@ -107,12 +109,40 @@ def build_system(cls: type[S], path: Path, *, strict: bool = False,
     options.setdefault("robot", config.robot)
     options.setdefault("base_dir", config.path.parent)
     options.setdefault("process", process or MAIN_PROCESS)
+    ports: list[PortInfo] = []
+    if process is not None and only is None:
+        everyone, every_delay, _ = build_components(config)
+        groups = {entry.Name: entry.group for entry in config.launcher.Components}
+        ports = [replace(port, process=groups[c.name]) for c in everyone
+                 if groups[c.name] != process for port in c.ports()]
+        first, delays = _global_start(everyone, every_delay, [c.name for c in components])
+        options.setdefault("start_after", first)
     system = cls(components, start_delays=delays, **options)  # type: ignore[call-arg]
     system.notes.extend(notes)  # type: ignore[attr-defined]
     system.configuration = config  # type: ignore[attr-defined]
+    system.peer_ports.extend(ports)  # type: ignore[attr-defined]
     if bridge is not False:
         _attach_bridge(system, config, process, bridge)
     return system
+
+
+def _global_start(everyone: list[Component[Any]], delays: dict[str, float],
+                  local: list[str]) -> tuple[float, dict[str, float]]:
+    """When a process group starts its first component, and the delays after each, so
+    that every component starts at the clock time the whole Launcher would start it in
+    one process, and every group's start ends when the whole Launcher's would (the times
+    a split run keeps, decision 0011)."""
+    starts: dict[str, float] = {}
+    offset = 0.0
+    for component in everyone:
+        starts[component.name] = offset
+        offset += delays[component.name]
+    if not local:
+        return offset, {}
+    mine = {}
+    for name, following in zip(local, [*local[1:], None], strict=True):
+        mine[name] = (starts[following] if following else offset) - starts[name]
+    return starts[local[0]], mine
 
 
 def _attach_bridge(system: Any, config: Configuration, process: str | None,

@@ -59,6 +59,8 @@ class PortInfo:
     domain: str | None = None  # None: the system's robot
     #: the IDL classes behind ``types`` (events only), for subtype checks
     classes: tuple[type, ...] = field(default=(), compare=False)
+    #: the process group running the component ("": this process)
+    process: str = field(default="", compare=False)
 
     @property
     def label(self) -> str:
@@ -305,4 +307,5 @@ class Catalog:
 
     def as_dicts(self) -> list[dict[str, Any]]:
         return [{"component": p.component, "direction": p.direction.value, "name": p.name,
-                 "types": list(p.types), "domain": p.domain} for p in self.ports]
+                 "types": list(p.types), "domain": p.domain, "process": p.process}
+                for p in self.ports]

@@ -43,7 +43,7 @@ from afa.events import Event, EventChannel, Overflow, Subscription
 from afa.meter import LoopMeter
 from afa.naming import NameRegistry, join_name
 from afa.polling import LocalInvoker, PollLayer, current_caller, proxy_for
-from afa.ports import Catalog
+from afa.ports import Catalog, PortInfo
 from afa.tasks import Scope, TaskGroup
 from afa.transport import DeviceFactory, DeviceOpener
 from idl._base import Interface
@@ -143,6 +143,7 @@ class System:
         real_devices: bool | None = None,
         process: str = "main",
         meter: bool = False,
+        start_after: float = 0.0,
     ) -> None:
         self.robot = robot
         self.process = process  # this process's group name (origin prefix across a bridge)
@@ -159,6 +160,9 @@ class System:
         self.devices = DeviceOpener(overrides, allow_real=real_devices, clock=self.clock)
         self.restart_policy = restart_policy
         self.start_delays = dict(start_delays or {})
+        #: clock seconds to wait before starting the first component (a process group of
+        #: a split configuration starts its part of the Launcher when one process would)
+        self.start_after = start_after
         self.base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
         self.configuration: Any = None  # the validated Configuration, when built from XML
         self.components: dict[str, Component[Any]] = {}
@@ -169,10 +173,14 @@ class System:
         self._tasks: TaskGroup | None = None
         self._observers: list[Observer] = []
         self._services: list[Service] = []
+        #: the ports of the components other processes run (a split configuration), so
+        #: that the catalog describes the whole distributed system
+        self.peer_ports: list[PortInfo] = []
         self._started_services: list[Service] = []
         self._running = False
         self._stopped = asyncio.Event()
         self._failed = asyncio.Event()
+        self._stop_requested = asyncio.Event()
         for component in components:
             self.add(component)
         unknown = sorted(set(overrides) - set(self.components))
@@ -241,9 +249,10 @@ class System:
         return self.meter
 
     def catalog(self) -> Catalog:
-        """Every declared port of every component (available before start)."""
-        return Catalog([port for c in self.components.values() for port in c.ports()],
-                       self.robot)
+        """Every declared port of every component (available before start), with those
+        of the other processes of a split configuration (``PortInfo.process`` set)."""
+        return Catalog([port for c in self.components.values() for port in c.ports()]
+                       + self.peer_ports, self.robot)
 
     # -- running -------------------------------------------------------------------------
     async def __aenter__(self) -> System:
@@ -269,6 +278,7 @@ class System:
         self._running = True
         self._stopped = asyncio.Event()
         self._failed = asyncio.Event()
+        self._stop_requested = asyncio.Event()
         self._tasks = TaskGroup(f"system {self.robot}", on_failure=self._task_failed,
                                 meter=self.meter)
         for observer in self._observers:
@@ -285,6 +295,8 @@ class System:
         if failures:
             await self.stop(raise_failures=False)
             raise StartupError(failures)
+        if self.start_after > 0:
+            await self.clock.sleep(self.start_after)
         for component in list(self.components.values()):
             self._launch(component)
             while component.state in (State.CREATED, State.STARTING):
@@ -332,11 +344,16 @@ class System:
         a task of the system (not of a component) fails."""
         self._raise_failures()
         waiter = self._stopped.wait() if duration is None else self.clock.sleep(duration)
-        waiters = [waiter, self._failed.wait()]
+        waiters = [waiter, self._failed.wait(), self._stop_requested.wait()]
         if until is not None:
             waiters.append(until.wait())
         await _first_of(*waiters)
         self._raise_failures()
+
+    def request_stop(self) -> None:
+        """Make :meth:`run` return now (a time master ended a split run; an operator's
+        stop). The caller then stops the system as usual."""
+        self._stop_requested.set()
 
     def _raise_failures(self) -> None:
         if len(self.failures) > self._reported:

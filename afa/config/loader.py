@@ -19,8 +19,8 @@ from typing import Any
 
 from pydantic import ValidationError, field_validator
 
-from afa.config.miro import ParameterSet, Section, read_document
 from afa.bridge.parameters import BridgeParameters
+from afa.config.miro import ParameterSet, Section, read_document
 from afa.config.parameters import Parameters, param
 from afa.errors import AfaError, ConfigError
 
