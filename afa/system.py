@@ -341,7 +341,12 @@ class System:
                   until: asyncio.Event | None = None) -> None:
         """Run until ``duration`` clock seconds have passed (None: until stopped), or
         ``until`` is set (a simulated mission finished, say). Raises TaskFailed as soon as
-        a task of the system (not of a component) fails."""
+        a task of the system (not of a component) fails.
+
+        When the duration or ``until`` ends it, services with a ``finish_instant()``
+        coroutine are awaited (a lock-step bridge lets every process finish the last
+        instant), so that what happens at the end time is the same whether the system is
+        one process or several."""
         self._raise_failures()
         waiter = self._stopped.wait() if duration is None else self.clock.sleep(duration)
         waiters = [waiter, self._failed.wait(), self._stop_requested.wait()]
@@ -349,6 +354,12 @@ class System:
             waiters.append(until.wait())
         await _first_of(*waiters)
         self._raise_failures()
+        if (duration is not None or until is not None) and not self._stop_requested.is_set():
+            for service in self._started_services:
+                finish = getattr(service, "finish_instant", None)
+                if finish is not None:
+                    await _first_of(finish(), self._failed.wait())
+            self._raise_failures()
 
     def request_stop(self) -> None:
         """Make :meth:`run` return now (a time master ended a split run; an operator's

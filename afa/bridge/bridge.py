@@ -46,7 +46,15 @@ from afa.bridge.info import process_info
 from afa.bridge.link import Inbox, close_session, load_zenoh, open_session, session_config
 from afa.bridge.lockstep import Traffic
 from afa.bridge.parameters import BridgeParameters, off_loopback
-from afa.bridge.remote import RemoteServant, caller_attachment, find_interface, parse_caller
+from afa.bridge.remote import (
+    ERROR,
+    RESULT,
+    RemoteServant,
+    caller_attachment,
+    find_interface,
+    parse_caller,
+    reply_attachment,
+)
 from afa.errors import AfaError, ComponentError, EDevIO, NameNotFound
 from afa.events import Event
 from afa.naming import join_name
@@ -134,6 +142,13 @@ class Bridge:
     def clock(self) -> Any:
         return self.system.clock
 
+    def caller(self, time: float | None = None) -> bytes:
+        """The attachment of this process's calls (who, and in lock-step when)."""
+        return caller_attachment(self.process, self.zid, time)
+
+    def _now(self) -> float | None:
+        return self.clock.monotonic() if self.lockstep is not None else None
+
     # -- wiring ---------------------------------------------------------------------------
     def attach(self, system: Any) -> Bridge:
         """Run this bridge while ``system`` runs (before it starts)."""
@@ -155,16 +170,23 @@ class Bridge:
 
     # -- the service ------------------------------------------------------------------------
     async def start(self, system: Any) -> None:
-        zenoh = self.zenoh
         p = self.parameters
-        loop = asyncio.get_running_loop()
         for endpoint in off_loopback(p):
             log.warning("bridge: %s is not a loopback endpoint: other hosts can reach this "
                         "process (see docs/distributed.md for TLS and access control)",
                         endpoint)
         self.session = await open_session(session_config(p, system.base_dir), system.clock)
+        try:
+            await self._declare(system)
+        except BaseException:
+            await self.stop()  # a half-open bridge must not keep Zenoh's threads alive
+            raise
+
+    async def _declare(self, system: Any) -> None:
+        zenoh = self.zenoh
+        p = self.parameters
+        loop = asyncio.get_running_loop()
         self.zid = str(self.session.zid())
-        self.attachment = caller_attachment(self.process, self.zid)
         self._data = Inbox(loop, p.EventBuffer)
         self._alive = Inbox(loop, 1 << 16)
         self._queries = Inbox(loop, p.MaxQueries * 4, drop_oldest=False, refuse=self._refuse)
@@ -218,6 +240,12 @@ class Bridge:
         log.info("bridge %s/%s up (zid %s) listening on %s, connecting to %s", self.robot,
                  self.process, self.zid, ", ".join(p.Listen) or "nothing",
                  ", ".join(p.Connect) or "nothing")
+
+    async def finish_instant(self) -> None:
+        """In lock-step, wait until every process has finished the current instant and
+        hold time there (the end of a run; ``System.run``). Otherwise nothing."""
+        if self.lockstep is not None:
+            await self.lockstep.finish_instant()
 
     def _spawn(self, coroutine: Any, name: str) -> None:
         self._tasks.append(self.system.tasks.spawn(coroutine, owner="bridge", name=name))
@@ -506,7 +534,8 @@ class Bridge:
     def _answer_error(self, query: Any, error: BaseException) -> None:
         self._replied(query)
         try:
-            query.reply_err(encode_error(error))
+            query.reply(query.key_expr, encode_error(error),
+                        attachment=reply_attachment(ERROR, self._now()))
         except Exception:  # the querier is gone
             pass
         finally:
@@ -570,8 +599,10 @@ class Bridge:
                                          payload.to_bytes() if payload is not None else b"")
             attachment = query.attachment
             caller = parse_caller(attachment.to_bytes() if attachment is not None else None)
+            if self.lockstep is not None and caller[2] is not None:
+                await self.clock.sleep_until(caller[2])  # the grant may still be on its way
             try:
-                check_command(interface, method, arguments, caller,
+                check_command(interface, method, arguments, caller[:2],
                               self.parameters.AllowCommandFrom, server=full)
             except AfaError:
                 self.refused_commands += 1
@@ -588,7 +619,7 @@ class Bridge:
             self.served_calls += 1
             self._replied(query)
             try:
-                query.reply(key, data)
+                query.reply(key, data, attachment=reply_attachment(RESULT, self._now()))
             except Exception:  # the caller gave up (timeout) or went away
                 pass
             finally:

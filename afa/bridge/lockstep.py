@@ -211,6 +211,9 @@ class LockStep:
                 return snapshot
             await bridge.changed.wait()
 
+    async def finish_instant(self) -> None:
+        """The end of a run: let every process finish the current instant, then hold."""
+
     def statistics(self) -> dict[str, Any]:
         return {"role": self.role, "rounds": self.rounds, "grants": self.grants,
                 "rounds_skipped": self.skipped_rounds, "time": self.clock.monotonic()}
@@ -231,6 +234,8 @@ class TimeMaster(LockStep):
         self._reports: dict[str, dict[str, Any]] = {}
         self._reports_in: asyncio.Event = asyncio.Event()
         self._anchor: tuple[float, float, float] | None = None
+        self._holding = False  # the run is ending: no more grants
+        self._quiescent: asyncio.Event = asyncio.Event()
 
     async def join(self) -> None:
         loop = asyncio.get_running_loop()
@@ -327,6 +332,9 @@ class TimeMaster(LockStep):
                 if not self._consistent(mine, reports):
                     continue
                 nexts = {f: r.get("next") for f, r in reports.items()}
+            if self._holding:  # everyone has finished this instant: hold time here
+                self._quiescent.set()
+                await failure
             candidates = [d for d in [clock.next_deadline(), *nexts.values()] if d is not None]
             if not candidates:
                 await self._activity(failure)
@@ -361,6 +369,18 @@ class TimeMaster(LockStep):
         if any(r.get("round") != number or r.get("t") != now for r in reports.values()):
             return None
         return reports
+
+    async def finish_instant(self) -> None:
+        """Stop granting; return once every member is idle at the current instant with
+        nothing in flight (at once if the run was ended by a member or failed)."""
+        self._holding = True
+        task = self._task
+        while not (task is None or task.done() or self._ended or self._quiescent.is_set()
+                   or (self._failure is not None and self._failure.done())):
+            try:
+                await asyncio.wait_for(self._quiescent.wait(), 0.5)
+            except TimeoutError:
+                pass
 
     def _consistent(self, mine: dict[str, Any], reports: dict[str, dict[str, Any]]) -> bool:
         members = {self.bridge.process: mine, **reports}

@@ -19,6 +19,8 @@ whose liveliness token disappears).
 from __future__ import annotations
 
 import asyncio
+import math
+import struct
 from functools import cache
 from typing import TYPE_CHECKING, Any
 
@@ -33,7 +35,7 @@ if TYPE_CHECKING:
     from afa.bridge.lockstep import Traffic
 
 __all__ = ["RemoteServant", "RemoteCall", "find_interface", "caller_attachment",
-           "parse_caller"]
+           "parse_caller", "reply_attachment", "parse_reply"]
 
 #: Zenoh's own deadline for a query: a backstop behind the caller's per-call timeout.
 QUERY_BACKSTOP = 3600.0
@@ -64,9 +66,39 @@ def _refresh() -> dict[str, type[Interface]]:
     return found
 
 
-def caller_attachment(process: str, zid: str) -> bytes:
-    """Who is calling: ``process`` and Zenoh id, for the server's command guard."""
-    return f"{process}\n{zid}".encode()
+def caller_attachment(process: str, zid: str, time: float | None = None) -> bytes:
+    """Who is calling (``process`` and Zenoh id, for the server's command guard) and, in
+    lock-step, at what virtual time (the server answers no earlier)."""
+    return f"{process}\n{zid}\n{'' if time is None else repr(time)}".encode()
+
+
+def parse_caller(attachment: bytes | None) -> tuple[str, str, float | None]:
+    """Inverse of :func:`caller_attachment` (empty names and None when absent)."""
+    if not attachment:
+        return "", "", None
+    process, _, rest = attachment.decode(errors="replace").partition("\n")
+    zid, _, time = rest.partition("\n")
+    try:
+        return process, zid, float(time) if time else None
+    except ValueError:
+        return process, zid, None
+
+
+#: The attachment of a reply: 0 for a result, 1 for an error; the server's virtual time
+#: (NaN outside lock-step).
+_REPLY = struct.Struct("<Bd")
+RESULT, ERROR = 0, 1
+
+
+def reply_attachment(kind: int, time: float | None) -> bytes:
+    return _REPLY.pack(kind, math.nan if time is None else time)
+
+
+def parse_reply(attachment: bytes | None) -> tuple[int, float | None]:
+    if attachment is None or len(attachment) != _REPLY.size:
+        return RESULT, None
+    kind, time = _REPLY.unpack(attachment)
+    return kind, None if math.isnan(time) else time
 
 
 class RemoteCall:
@@ -80,7 +112,9 @@ class RemoteCall:
     def __init__(self, zenoh: Any, session: Any, robot: str, name: str,
                  interface: type[Interface], method: str, arguments: dict[str, Any],
                  attachment: bytes, *, traffic: Traffic | None = None, process: str = "",
-                 on_done: Any = None) -> None:
+                 on_done: Any = None, clock: Any = None) -> None:
+        """``clock``: in lock-step, a reply stamped later than this clock's time waits
+        for it (the grant of that time may still be on its way)."""
         payload = encode_arguments(interface, method, arguments)  # InterfaceError if bad
         loop = asyncio.get_running_loop()
         self.future: asyncio.Future[Any] = loop.create_future()
@@ -102,12 +136,26 @@ class RemoteCall:
                     "running)"))
                 return
             reply = replies[0]
+            if reply.ok is None:  # Zenoh's own error (the server's session went away)
+                future.set_exception(decode_error(reply.err.payload.to_bytes()))
+                return
+            attachment = reply.ok.attachment
+            kind, when = parse_reply(attachment.to_bytes() if attachment is not None else None)
+            if clock is not None and when is not None and when > clock.monotonic():
+                # lock-step: the answer overtook the grant of its time; hold it until then
+                clock.call_at(when, lambda: resolve(kind, reply))
+            else:
+                resolve(kind, reply)
+
+        def resolve(kind: int, reply: Any) -> None:
+            if future.done():
+                return
             try:
-                if reply.ok is not None:
-                    future.set_result(decode_result(interface, method,
-                                                    reply.ok.payload.to_bytes()))
+                data = reply.ok.payload.to_bytes()
+                if kind == ERROR:
+                    future.set_exception(decode_error(data))
                 else:
-                    future.set_exception(decode_error(reply.err.payload.to_bytes()))
+                    future.set_result(decode_result(interface, method, data))
             except Exception as exc:  # an undecodable reply: InterfaceError
                 future.set_exception(exc)
 
@@ -146,13 +194,6 @@ class RemoteCall:
                 self.future.cancel()  # whatever arrives later is nobody's business
 
 
-def parse_caller(attachment: bytes | None) -> tuple[str, str]:
-    if not attachment:
-        return "", ""
-    process, _, zid = attachment.decode(errors="replace").partition("\n")
-    return process, zid
-
-
 class RemoteServant:
     """Stands in the local registry for ``name``, served by ``process`` elsewhere."""
 
@@ -173,10 +214,12 @@ class RemoteServant:
         """Call ``method`` in the serving process; returns its result or raises the afa
         error it raised (NameNotFound if the process goes away meanwhile)."""
         bridge = self.bridge
+        lockstep = bridge.lockstep is not None
         call = RemoteCall(bridge.zenoh, bridge.session, bridge.robot, self.name,
-                          self.interface, method, arguments, bridge.attachment,
+                          self.interface, method, arguments,
+                          bridge.caller(bridge.clock.monotonic() if lockstep else None),
                           traffic=bridge.traffic, process=self.process,
-                          on_done=bridge.changed.set)
+                          on_done=bridge.changed.set, clock=bridge.clock if lockstep else None)
         self.calls += 1
         self._pending.add(call.future)
         try:
