@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from afa.events import Event
-from idl._base import IDLModel
+from idl._base import IDLModel, type_name
 
 __all__ = ["brief", "event_line", "event_json", "table", "Output", "PipeClosed"]
 
@@ -54,7 +54,7 @@ def event_json(event: Event) -> str:
     :meth:`IDLModel.to_json`; ``IDLModel.from_json`` reads it back)."""
     return json.dumps({"time": event.time, "domain": event.domain, "type": event.type,
                        "origin": event.origin, "seq": event.seq,
-                       "body_type": type(event.body).idl_name,
+                       "body_type": type_name(type(event.body)),
                        "body": json.loads(event.body.to_json())})
 
 

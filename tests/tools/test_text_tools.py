@@ -1,0 +1,201 @@
+"""The text tools against a running system (the simulated Raptor with ``--bridge`` on a
+loopback port, in real time) and, where a recording is needed, against a log: output,
+exit codes, Ctrl-C, a closed pipe, an unreachable system."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.bridge.conftest import ROOT, Peer, environment
+from tests.bridge.parts import endpoint, free_port
+
+pytest.importorskip("zenoh", reason="the tools need the extra afa[zenoh]")
+
+RAPTOR = ROOT / "configs" / "raptor.xml"
+
+
+@pytest.fixture(scope="module")
+def running() -> Iterator[str]:
+    """The simulated Raptor with a bridge on a free loopback port; its endpoint."""
+    where = endpoint(free_port())
+    raptor = Peer(["-m", "afa", "run", str(RAPTOR), "--sim", "--duration", "600", "--bridge",
+                   "--listen", where], ready="never")
+    try:
+        deadline = time.monotonic() + 60
+        while True:  # up once ModelServer's name is served over the bridge
+            names = afa("names", "--json", "--connect", where, check=False)
+            if names.returncode == 0 and "Raptor/ModelService" in names.stdout \
+                    and "Raptor/Laser11" in names.stdout:
+                break
+            assert raptor.process.poll() is None, raptor.errors[-10:]
+            assert time.monotonic() < deadline, "the simulated Raptor did not come up"
+            time.sleep(0.5)
+        yield where
+    finally:
+        raptor.stop()
+
+
+def afa(*args: str, check: bool = True, timeout: float = 60,
+        **kwargs: object) -> subprocess.CompletedProcess[str]:
+    result = subprocess.run([sys.executable, "-m", "afa", *args], cwd=ROOT, env=environment(),
+                            capture_output=True, text=True, timeout=timeout, **kwargs)
+    if check:
+        assert result.returncode == 0, result.stderr
+    return result
+
+
+def test_names_lists_the_registry_with_interfaces_owners_and_processes(running: str) -> None:
+    text = afa("names", "--connect", running).stdout
+    assert text.splitlines()[0].split() == ["NAME", "INTERFACE", "OWNER", "PROCESS"]
+    rows = {line.split()[0]: line.split()[1:] for line in text.splitlines()[1:]}
+    assert rows["Raptor/ModelService"] == ["Platform", "modelServer", "main"]
+    assert rows["Raptor/RaptorMotion"] == ["VehicleControl", "RaptorService", "main"]
+    assert rows["Raptor/EventChannel"][1] == "system"
+    table = json.loads(afa("names", "--json", "--connect", running).stdout)
+    assert {"name": "Raptor/Gps", "interface": "idl.interfaces.Gps",
+            "owner": "GpsSokkiaService", "process": "main", "remote": False} in table
+
+
+def test_echo_prints_events_as_text_and_as_lossless_json(running: str) -> None:
+    lines = afa("echo", "Gps", "--count", "2", "--connect", running).stdout.splitlines()
+    assert len(lines) == 2 and all("Raptor/Gps from main/GpsSokkiaService: GpsIDL" in line
+                                   for line in lines)
+    from idl import GpsIDL
+
+    records = [json.loads(line) for line in afa("echo", "Gps", "--json", "--count", "2",
+                                                "--connect", running).stdout.splitlines()]
+    assert [r["body_type"] for r in records] == ["idl.sensors.GpsIDL@1"] * 2
+    fix = GpsIDL.from_json(json.dumps(records[0]["body"]))  # lossless: reads back
+    assert 50 < fix.latitude < 51 and records[1]["time"] > records[0]["time"]
+
+
+def test_echo_says_when_no_process_declares_the_event(running: str) -> None:
+    process = subprocess.Popen([sys.executable, "-m", "afa", "echo", "NoSuchEvent",
+                                "--connect", running], cwd=ROOT, env=environment(),
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        assert process.stderr is not None
+        line = process.stderr.readline()
+        while "warning" not in line and time.monotonic() < deadline:
+            line = process.stderr.readline()
+        assert "no running process declares the event 'NoSuchEvent'" in line
+        process.send_signal(signal.SIGINT)  # Ctrl-C ends it cleanly
+        assert process.wait(20) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        for stream in (process.stdout, process.stderr):
+            assert stream is not None
+            stream.close()
+
+
+def test_hz_reports_rate_jitter_and_gaps(running: str) -> None:
+    text = afa("hz", "Imu", "--count", "1", "--every", "2", "--connect", running).stdout
+    assert text.startswith("Imu: ") and " Hz  period min " in text and "gaps" in text
+    rate = float(text.split()[1])
+    assert rate > 1.0  # the simulated 3DM-GX1 sends several samples a second
+
+
+def test_poll_calls_with_arguments_parsed_by_the_interface(running: str) -> None:
+    frames = afa("poll", "ModelService", "getBodyFrameList", "FrontNoddingSICKLeft", "--json",
+                 "--connect", running).stdout
+    values = json.loads(frames)["values"]
+    assert values
+    pose = json.loads(afa("poll", "ModelService", "getTransformation",
+                          f"B=FrontNoddingSICKLeft:{values[0]}",
+                          "A=Raptor:RearAxleCenter", "--json", "--connect", running).stdout)
+    assert pose["poseValidFlag"] is True and pose["HTransform"]["shape"] == [4, 4]
+    # a bad argument: the signature, exit 2
+    bad = afa("poll", "ModelService", "getTransformation", "only-one", "--connect", running,
+              check=False)
+    assert bad.returncode == 2 and "missing argument B" in bad.stderr
+    assert "getTransformation(A: str, B: str)" in bad.stderr
+    # the server's own error, by name
+    wrong = afa("poll", "ModelService", "getTransformation", "Raptor:RearAxleCenter",
+                "Nobody:Nothing", "--connect", running, check=False)
+    assert wrong.returncode == 1 and wrong.stderr.startswith("afa poll: EOutOfBounds: ")
+
+
+def test_a_remote_setvelocity_is_refused_and_stopvehicle_is_not(running: str) -> None:
+    refused = afa("poll", "RaptorMotion", "setVelocity", '{"translation": 1.0}',
+                  "--connect", running, check=False)
+    assert refused.returncode == 1
+    assert "CommandRefused" in refused.stderr and "setVelocity from tool refused" in refused.stderr
+    assert afa("poll", "RaptorMotion", "stopVehicle", "--connect", running).stdout.strip() \
+        == "None (false)"
+
+
+def test_sensor3d_prints_range_points_in_the_raptor_frame(running: str) -> None:
+    text = afa("sensor3d", "stream", "Laser11", "--count", "1", "--max-points", "5",
+               "--connect", running).stdout.splitlines()
+    assert text[0].startswith("# Laser11 t=") and "-> Raptor:RearAxleCenter" in text[0]
+    points = np.array([[float(v) for v in line.split()] for line in text[1:]])
+    assert points.shape[1] == 3 and len(points) <= 5
+    # in the vehicle frame the forward lasers see the ground ahead: x > 0, z below the mount
+    assert np.all(points[:, 0] > 0)
+    same = afa("sensor3d", "stream", "Laser11", "--count", "1", "--frame", "sensor",
+               "--connect", running).stdout.splitlines()
+    assert "frame FrontNoddingSICK" in same[0] and same[0].endswith("shown")
+    got = afa("sensor3d", "get", "Stereo", "--every", "1000", "--max-points", "3",
+              "--connect", running).stdout.splitlines()
+    assert got[0].startswith("# Stereo t=") and len(got) == 4
+
+
+def test_top_shows_the_launcher_table(running: str) -> None:
+    text = afa("top", "--once", "--connect", running).stdout
+    head, traffic, columns, *rows = text.strip().splitlines()
+    assert head.startswith("Raptor/main  pid ") and "memory" in head and "loop share" in head
+    # the tools that ran before are no peers: they hold no token and serve nothing
+    assert traffic.strip().startswith("bridge: peers none;")
+    assert columns.split() == ["COMPONENT", "TYPE", "STATE", "HEALTH", "RESTARTS", "IN", "OUT",
+                               "LOOP"]
+    table = {row.split()[0]: row.split() for row in rows}
+    assert table["modelServer"][1:3] == ["ModelServer", "running"]
+    assert int(table["modelServer"][-3]) > 0 and int(table["modelServer"][-2]) > 0  # in, out
+    assert table["modelServer"][-1].endswith("%")
+
+
+def test_a_closed_pipe_ends_a_tool_quietly(running: str) -> None:
+    shell = (f"{sys.executable} -m afa echo Imu --connect {running} | head -1; "
+             "echo status ${PIPESTATUS[0]}")
+    result = subprocess.run(["bash", "-c", shell], cwd=ROOT, env=environment(),
+                            capture_output=True, text=True, timeout=60)
+    lines = result.stdout.splitlines()
+    assert "Raptor/Imu" in lines[0] and lines[-1] == "status 0"
+    assert "Traceback" not in result.stderr and "BrokenPipe" not in result.stderr
+
+
+def test_tools_say_when_no_system_is_reachable() -> None:
+    nobody = endpoint(free_port())
+    for tool in (["names"], ["echo", "Gps"], ["top", "--once"], ["poll", "Gps", "getPosition"]):
+        result = afa(*tool, "--connect", nobody, check=False)
+        assert result.returncode == 1, tool
+        assert f"no afa system is reachable at {nobody}" in result.stderr, tool
+
+
+def test_log_mode_reads_a_recording_or_says_it_cannot(tmp_path: Path) -> None:
+    """With ``--log`` the tools read a recording through afa.log (the record/replay
+    package); without it they say so rather than pretend."""
+    import importlib.util
+
+    if importlib.util.find_spec("afa.log") is None:
+        result = afa("echo", "Gps", "--log", str(tmp_path / "none.mcap"), check=False)
+        assert result.returncode == 1 and "needs afa's record/replay package" in result.stderr
+        return
+    record = tmp_path / "run.mcap"
+    afa("run", str(RAPTOR), "--sim", "--fast", "--duration", "5", "--record", str(record))
+    lines = afa("echo", "Gps", "--json", "--log", str(record)).stdout.splitlines()
+    assert lines and json.loads(lines[0])["type"] == "Gps"
+    assert afa("hz", "Imu", "--log", str(record)).stdout.startswith("Imu: ")
+    assert "ModelService" in afa("names", "--log", str(record)).stdout
