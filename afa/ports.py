@@ -307,5 +307,6 @@ class Catalog:
 
     def as_dicts(self) -> list[dict[str, Any]]:
         return [{"component": p.component, "direction": p.direction.value, "name": p.name,
-                 "types": list(p.types), "domain": p.domain, "process": p.process}
+                 "types": list(p.types), "domain": p.domain,
+                 **({"process": p.process} if p.process else {})}  # another process's port
                 for p in self.ports]

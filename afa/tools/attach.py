@@ -36,6 +36,8 @@ __all__ = ["Attachment", "Unreachable", "INFO_TIMEOUT"]
 
 #: Seconds to wait for processes to answer an info query.
 INFO_TIMEOUT = 3.0
+#: Seconds to wait, after opening the session, for a connection to a peer.
+CONNECT_GRACE = 1.0
 
 
 class Unreachable(AfaError, ConnectionError):
@@ -115,16 +117,30 @@ class Attachment:
         return infos
 
     async def require(self, attempts: int = 3) -> list[dict[str, Any]]:
-        """:meth:`infos`, retried while a peer connection may still be coming up; raises
-        :class:`Unreachable` when no process answers."""
+        """:meth:`infos` once a peer is connected (waiting up to the timeout for one),
+        retried while a process may still be starting; raises :class:`Unreachable` when
+        nothing is connected or no afa process answers."""
+        loop = asyncio.get_running_loop()
+        # opening the session has tried the endpoints already: a moment's grace
+        deadline = loop.time() + min(self.timeout, CONNECT_GRACE)
+        while not self._connected():
+            if loop.time() >= deadline:
+                raise Unreachable(f"no afa system is reachable at {self.where} (nothing "
+                                  "accepts a connection there; start one with `afa run "
+                                  "CONFIG --bridge`, or give its endpoint with --connect)")
+            await asyncio.sleep(0.05)  # a CLI waiting for a connection: real time
         for attempt in range(attempts):
             infos = await self.infos()
             if infos:
                 return infos
             if attempt + 1 < attempts:
-                await asyncio.sleep(0.5)  # a CLI waiting for a peer to connect: real time
-        raise Unreachable(f"no afa system is reachable at {self.where} (start one with `afa "
-                          "run CONFIG --bridge`, or give its endpoint with --connect)")
+                await asyncio.sleep(0.5)
+        raise Unreachable(f"no afa system is reachable at {self.where} (a Zenoh peer is "
+                          "there, but no afa process answers)")
+
+    def _connected(self) -> bool:
+        info = self.session.info
+        return bool(info.peers_zid() or info.routers_zid())
 
     def robots(self) -> list[str]:
         return sorted({info["robot"] for info in self._infos or []})

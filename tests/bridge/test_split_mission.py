@@ -16,7 +16,7 @@ from tests.bridge.conftest import ROOT, Peer
 from tests.bridge.parts import endpoint, free_port
 
 RAPTOR = ROOT / "configs" / "raptor.xml"
-DURATION = "6"
+DURATION = "4"
 
 
 def split_config(tmp_path: Path) -> Path:

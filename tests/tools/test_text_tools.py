@@ -1,15 +1,18 @@
-"""The text tools against a running system (the simulated Raptor with ``--bridge`` on a
-loopback port, in real time) and, where a recording is needed, against a log: output,
-exit codes, Ctrl-C, a closed pipe, an unreachable system."""
+"""The text tools against a running system (the vehicle process of the simulated Raptor,
+bridged on a loopback port, in real time) and against a recording: output, exit codes,
+Ctrl-C, a closed pipe, an unreachable system. Most run in this process through
+``afa.cli.main`` (a tool is a short-lived Zenoh session); Ctrl-C and a closed pipe are
+tried on real child processes."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -27,25 +30,33 @@ RAPTOR = ROOT / "configs" / "raptor.xml"
 def running() -> Iterator[str]:
     """The simulated Raptor with a bridge on a free loopback port; its endpoint."""
     where = endpoint(free_port())
-    raptor = Peer(["-m", "afa", "run", str(RAPTOR), "--sim", "--duration", "600", "--bridge",
-                   "--listen", where], ready="never")
+    raptor = Peer(["-m", "afa", "run", str(RAPTOR), "--sim", "--duration", "600", "--process",
+                   "vehicle", "--listen", where], ready="never")
     try:
-        deadline = time.monotonic() + 60
-        while True:  # up once ModelServer's name is served over the bridge
-            names = afa("names", "--json", "--connect", where, check=False)
-            if names.returncode == 0 and "Raptor/ModelService" in names.stdout \
-                    and "Raptor/Laser11" in names.stdout:
-                break
+        deadline = time.monotonic() + 90
+        while not asyncio.run(_serves(where, {"Raptor/ModelService", "Raptor/Laser11",
+                                              "Raptor/Stereo", "Raptor/RaptorMotion"})):
             assert raptor.process.poll() is None, raptor.errors[-10:]
             assert time.monotonic() < deadline, "the simulated Raptor did not come up"
-            time.sleep(0.5)
+            time.sleep(0.2)
         yield where
     finally:
         raptor.stop()
 
 
+async def _serves(where: str, names: set[str]) -> bool:
+    """Whether the process at ``where`` serves all of ``names`` yet."""
+    from afa.tools.attach import Attachment
+
+    async with Attachment([where], timeout=1.0) as link:
+        infos = await link.infos()
+    served = {row["name"] for info in infos for row in info.get("names", [])}
+    return names <= served
+
+
 def afa(*args: str, check: bool = True, timeout: float = 60,
         **kwargs: object) -> subprocess.CompletedProcess[str]:
+    """``python -m afa ARGS`` in a child process."""
     result = subprocess.run([sys.executable, "-m", "afa", *args], cwd=ROOT, env=environment(),
                             capture_output=True, text=True, timeout=timeout, **kwargs)
     if check:
@@ -53,26 +64,51 @@ def afa(*args: str, check: bool = True, timeout: float = 60,
     return result
 
 
-def test_names_lists_the_registry_with_interfaces_owners_and_processes(running: str) -> None:
-    text = afa("names", "--connect", running).stdout
+Tool = Callable[..., "Ran"]
+
+
+class Ran:
+    def __init__(self, returncode: int, stdout: str, stderr: str) -> None:
+        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
+
+
+@pytest.fixture
+def tool(capsys: pytest.CaptureFixture[str]) -> Callable[..., Ran]:
+    """``tool("names", ...)``: ``afa names ...`` in this process (afa.cli.main)."""
+    from afa.cli import main
+
+    def run(*args: str, check: bool = True) -> Ran:
+        capsys.readouterr()
+        code = main(list(args))
+        out, err = capsys.readouterr()
+        if check:
+            assert code == 0, err
+        return Ran(code, out, err)
+
+    return run
+
+
+def test_names_lists_the_registry_with_interfaces_owners_and_processes(
+        running: str, tool: Tool) -> None:
+    text = tool("names", "--connect", running).stdout
     assert text.splitlines()[0].split() == ["NAME", "INTERFACE", "OWNER", "PROCESS"]
     rows = {line.split()[0]: line.split()[1:] for line in text.splitlines()[1:]}
-    assert rows["Raptor/ModelService"] == ["Platform", "modelServer", "main"]
-    assert rows["Raptor/RaptorMotion"] == ["VehicleControl", "RaptorService", "main"]
+    assert rows["Raptor/ModelService"] == ["Platform", "modelServer", "vehicle"]
+    assert rows["Raptor/RaptorMotion"] == ["VehicleControl", "RaptorService", "vehicle"]
     assert rows["Raptor/EventChannel"][1] == "system"
-    table = json.loads(afa("names", "--json", "--connect", running).stdout)
+    table = json.loads(tool("names", "--json", "--connect", running).stdout)
     assert {"name": "Raptor/Gps", "interface": "idl.interfaces.Gps",
-            "owner": "GpsSokkiaService", "process": "main", "remote": False} in table
+            "owner": "GpsSokkiaService", "process": "vehicle", "remote": False} in table
 
 
-def test_echo_prints_events_as_text_and_as_lossless_json(running: str) -> None:
-    lines = afa("echo", "Gps", "--count", "2", "--connect", running).stdout.splitlines()
-    assert len(lines) == 2 and all("Raptor/Gps from main/GpsSokkiaService: GpsIDL" in line
+def test_echo_prints_events_as_text_and_as_lossless_json(running: str, tool: Tool) -> None:
+    lines = tool("echo", "Gps", "--count", "2", "--connect", running).stdout.splitlines()
+    assert len(lines) == 2 and all("Raptor/Gps from vehicle/GpsSokkiaService: GpsIDL" in line
                                    for line in lines)
     from idl import GpsIDL
 
-    records = [json.loads(line) for line in afa("echo", "Gps", "--json", "--count", "2",
-                                                "--connect", running).stdout.splitlines()]
+    records = [json.loads(line) for line in tool("echo", "Gps", "--json", "--count", "2",
+                                                 "--connect", running).stdout.splitlines()]
     assert [r["body_type"] for r in records] == ["idl.sensors.GpsIDL@1"] * 2
     fix = GpsIDL.from_json(json.dumps(records[0]["body"]))  # lossless: reads back
     assert 50 < fix.latitude < 51 and records[1]["time"] > records[0]["time"]
@@ -100,64 +136,65 @@ def test_echo_says_when_no_process_declares_the_event(running: str) -> None:
             stream.close()
 
 
-def test_hz_reports_rate_jitter_and_gaps(running: str) -> None:
-    text = afa("hz", "Imu", "--count", "1", "--every", "2", "--connect", running).stdout
+def test_hz_reports_rate_jitter_and_gaps(running: str, tool: Tool) -> None:
+    text = tool("hz", "Imu", "--count", "1", "--every", "2", "--connect", running).stdout
     assert text.startswith("Imu: ") and " Hz  period min " in text and "gaps" in text
     rate = float(text.split()[1])
     assert rate > 1.0  # the simulated 3DM-GX1 sends several samples a second
 
 
-def test_poll_calls_with_arguments_parsed_by_the_interface(running: str) -> None:
-    frames = afa("poll", "ModelService", "getBodyFrameList", "FrontNoddingSICKLeft", "--json",
-                 "--connect", running).stdout
+def test_poll_calls_with_arguments_parsed_by_the_interface(running: str, tool: Tool) -> None:
+    frames = tool("poll", "ModelService", "getBodyFrameList", "FrontNoddingSICKLeft", "--json",
+                  "--connect", running).stdout
     values = json.loads(frames)["values"]
     assert values
-    pose = json.loads(afa("poll", "ModelService", "getTransformation",
-                          f"B=FrontNoddingSICKLeft:{values[0]}",
+    pose = json.loads(tool("poll", "ModelService", "getTransformation",
+                           f"B=FrontNoddingSICKLeft:{values[0]}",
                           "A=Raptor:RearAxleCenter", "--json", "--connect", running).stdout)
     assert pose["poseValidFlag"] is True and pose["HTransform"]["shape"] == [4, 4]
     # a bad argument: the signature, exit 2
-    bad = afa("poll", "ModelService", "getTransformation", "only-one", "--connect", running,
+    bad = tool("poll", "ModelService", "getTransformation", "only-one", "--connect", running,
               check=False)
     assert bad.returncode == 2 and "missing argument B" in bad.stderr
     assert "getTransformation(A: str, B: str)" in bad.stderr
     # the server's own error, by name
-    wrong = afa("poll", "ModelService", "getTransformation", "Raptor:RearAxleCenter",
+    wrong = tool("poll", "ModelService", "getTransformation", "Raptor:RearAxleCenter",
                 "Nobody:Nothing", "--connect", running, check=False)
     assert wrong.returncode == 1 and wrong.stderr.startswith("afa poll: EOutOfBounds: ")
 
 
-def test_a_remote_setvelocity_is_refused_and_stopvehicle_is_not(running: str) -> None:
-    refused = afa("poll", "RaptorMotion", "setVelocity", '{"translation": 1.0}',
-                  "--connect", running, check=False)
+def test_a_remote_setvelocity_is_refused_and_stopvehicle_is_not(running: str, tool: Tool) -> None:
+    refused = tool("poll", "RaptorMotion", "setVelocity", '{"translation": 1.0}',
+                   "--connect", running, check=False)
     assert refused.returncode == 1
     assert "CommandRefused" in refused.stderr and "setVelocity from tool refused" in refused.stderr
-    assert afa("poll", "RaptorMotion", "stopVehicle", "--connect", running).stdout.strip() \
+    assert tool("poll", "RaptorMotion", "stopVehicle", "--connect", running).stdout.strip() \
         == "None (false)"
 
 
-def test_sensor3d_prints_range_points_in_the_raptor_frame(running: str) -> None:
-    text = afa("sensor3d", "stream", "Laser11", "--count", "1", "--max-points", "5",
+def test_sensor3d_prints_range_points_in_the_raptor_frame(running: str, tool: Tool) -> None:
+    text = tool("sensor3d", "stream", "Laser11", "--count", "1", "--max-points", "5",
                "--connect", running).stdout.splitlines()
     assert text[0].startswith("# Laser11 t=") and "-> Raptor:RearAxleCenter" in text[0]
     points = np.array([[float(v) for v in line.split()] for line in text[1:]])
     assert points.shape[1] == 3 and len(points) <= 5
     # in the vehicle frame the forward lasers see the ground ahead: x > 0, z below the mount
     assert np.all(points[:, 0] > 0)
-    same = afa("sensor3d", "stream", "Laser11", "--count", "1", "--frame", "sensor",
+    same = tool("sensor3d", "stream", "Laser11", "--count", "1", "--frame", "sensor",
                "--connect", running).stdout.splitlines()
     assert "frame FrontNoddingSICK" in same[0] and same[0].endswith("shown")
-    got = afa("sensor3d", "get", "Stereo", "--every", "1000", "--max-points", "3",
+    got = tool("sensor3d", "get", "Stereo", "--every", "1000", "--max-points", "3",
               "--connect", running).stdout.splitlines()
     assert got[0].startswith("# Stereo t=") and len(got) == 4
 
 
-def test_top_shows_the_launcher_table(running: str) -> None:
-    text = afa("top", "--once", "--connect", running).stdout
+def test_top_shows_the_launcher_table(running: str, tool: Tool) -> None:
+    text = tool("top", "--once", "--connect", running).stdout
     head, traffic, columns, *rows = text.strip().splitlines()
-    assert head.startswith("Raptor/main  pid ") and "memory" in head and "loop share" in head
+    assert head.startswith("Raptor/vehicle  pid ") and "memory" in head and "loop share" in head
     # the tools that ran before are no peers: they hold no token and serve nothing
     assert traffic.strip().startswith("bridge: peers none;")
+    assert "running" in text and "FindPath" not in text  # the autonomy process is not here
     assert columns.split() == ["COMPONENT", "TYPE", "STATE", "HEALTH", "RESTARTS", "IN", "OUT",
                                "LOOP"]
     table = {row.split()[0]: row.split() for row in rows}
@@ -176,26 +213,53 @@ def test_a_closed_pipe_ends_a_tool_quietly(running: str) -> None:
     assert "Traceback" not in result.stderr and "BrokenPipe" not in result.stderr
 
 
-def test_tools_say_when_no_system_is_reachable() -> None:
+def test_tools_say_when_no_system_is_reachable(tool: Tool) -> None:
     nobody = endpoint(free_port())
-    for tool in (["names"], ["echo", "Gps"], ["top", "--once"], ["poll", "Gps", "getPosition"]):
-        result = afa(*tool, "--connect", nobody, check=False)
-        assert result.returncode == 1, tool
-        assert f"no afa system is reachable at {nobody}" in result.stderr, tool
+    for args in (["names"], ["poll", "Gps", "getPosition"]):
+        result = tool(*args, "--connect", nobody, check=False)
+        assert result.returncode == 1, args
+        assert f"no afa system is reachable at {nobody}" in result.stderr, args
 
 
-def test_log_mode_reads_a_recording_or_says_it_cannot(tmp_path: Path) -> None:
-    """With ``--log`` the tools read a recording through afa.log (the record/replay
-    package); without it they say so rather than pretend."""
-    import importlib.util
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A recording (afa.log's Recorder) of a small system: a laser publishing two points
+    ten times a second and a client that polled ModelServer's getTransformation once."""
+    pytest.importorskip("afa.log.recorder", reason="the log mode needs afa.log")
+    import asyncio
 
-    if importlib.util.find_spec("afa.log") is None:
-        result = afa("echo", "Gps", "--log", str(tmp_path / "none.mcap"), check=False)
-        assert result.returncode == 1 and "needs afa's record/replay package" in result.stderr
-        return
-    record = tmp_path / "run.mcap"
-    afa("run", str(RAPTOR), "--sim", "--fast", "--duration", "5", "--record", str(record))
-    lines = afa("echo", "Gps", "--json", "--log", str(record)).stdout.splitlines()
-    assert lines and json.loads(lines[0])["type"] == "Gps"
-    assert afa("hz", "Imu", "--log", str(record)).stdout.startswith("Imu: ")
-    assert "ModelService" in afa("names", "--log", str(record)).stdout
+    from tests.tools.recorded import record
+
+    path = tmp_path_factory.mktemp("log") / "small.mcap"
+    asyncio.run(record(path))
+    return path
+
+
+def test_echo_hz_and_names_read_a_recording(recording: Path, tool: Tool) -> None:
+    lines = tool("echo", "Laser11", "--log", str(recording)).stdout.splitlines()
+    assert len(lines) == 20 and "Raptor/Laser11 from laser: Range3dSeqEventIDL" in lines[0]
+    record = json.loads(tool("echo", "Laser11", "--json", "--count", "1", "--log",
+                             str(recording)).stdout)
+    assert record["body_type"] == "idl.range.Range3dSeqEventIDL@1"
+    rate = tool("hz", "Laser11", "--log", str(recording)).stdout
+    assert rate.startswith("Laser11: 10.000 Hz  period min 0.1000 max 0.1000") and "gaps 0" in rate
+    names = tool("names", "--log", str(recording)).stdout
+    assert "ModelService" in names and "Platform" in names and "model" in names
+
+
+def test_sensor3d_stream_reads_a_recording_through_its_recorded_transformation(
+        recording: Path, tool: Tool) -> None:
+    lines = tool("sensor3d", "stream", "Laser11", "--count", "1", "--log",
+                 str(recording)).stdout.splitlines()
+    assert lines[0].startswith("# Laser11 t=") and "-> Raptor:RearAxleCenter: 2 points" in lines[0]
+    assert lines[1:] == ["1.500 0.000 1.000", "2.500 0.000 1.000"]  # through the recorded pose
+    missing = tool("sensor3d", "stream", "Laser11", "--frame", "Raptor:Nowhere", "--log",
+                   str(recording), check=False)
+    assert missing.returncode == 1 and "no recorded getTransformation" in missing.stderr
+
+
+def test_without_afa_log_the_log_mode_says_so(
+        tmp_path: Path, tool: Tool, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "afa.log.reader", None)  # as if not installed
+    result = tool("echo", "Gps", "--log", str(tmp_path / "none.mcap"), check=False)
+    assert result.returncode == 1 and "needs afa's record/replay package" in result.stderr
