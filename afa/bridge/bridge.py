@@ -299,7 +299,7 @@ class Bridge:
             zenoh = self.zenoh
             lockstep = self.lockstep is not None
             publisher = self._publishers[name] = self.session.declare_publisher(
-                keys.event(self.robot, name), express=True,
+                keys.event(self.robot, name), express=self.parameters.Express,
                 # lock-step counts every event: never drop one; otherwise never block
                 congestion_control=(zenoh.CongestionControl.BLOCK if lockstep
                                     else zenoh.CongestionControl.DROP))

@@ -69,6 +69,10 @@ class BridgeParameters(Parameters):
     JoinTimeout: Annotated[float, Field(gt=0)] = param(
         30.0, unit="s", description="Real seconds the time master waits for the other process "
                                     "groups to join")
+    Express: bool = param(
+        False, description="Send each event on its own instead of letting Zenoh batch small "
+                           "ones (batching: a third of the CPU per event and no drops in a "
+                           "flood, the same median latency; benchmarks/bridge.py)")
     ZenohConfig: str = param(
         "", description="A Zenoh JSON5 configuration file applied first (TLS, access control); "
                         "relative to the configuration's folder")
