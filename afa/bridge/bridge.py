@@ -110,6 +110,7 @@ class Bridge:
         self._alive: Inbox[tuple[str, bool]] | None = None
         self._queries: Inbox[tuple[str, Any]] | None = None
         self._subscribers: list[Any] = []
+        self._interests: list[Any] = []  # the other processes' subscriptions, declared here
         self._publishers: dict[str, Any] = {}
         self._matching: dict[str, bool] = {}
         self._listeners: list[Any] = []
@@ -136,6 +137,7 @@ class Bridge:
         self.busy_refusals = 0
         self.served_calls = 0
         self.echoes = 0
+        self.unwanted = 0  # events that arrived for which this process has no subscriber
         self._logged: Counter[str] = Counter()
 
     @property
@@ -204,8 +206,15 @@ class Bridge:
                     traffic.saw(sender, _SEQ.unpack_from(extra)[0])
             data.push((str(sample.key_expr), sample.payload.to_bytes()))
 
+        name_tokens = f"{keys.ROOT}/{self.robot}/alive/name/"
+
         def on_alive(sample: Any) -> None:
-            alive.push((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT))
+            key = str(sample.key_expr)
+            if key.startswith(name_tokens):  # counted before it is queued (lock-step)
+                owner = key[len(name_tokens):].split("/")[1:2]
+                if owner and owner[0] != process:
+                    traffic.count(traffic.tokens_seen, owner[0])
+            alive.push((key, sample.kind == zenoh.SampleKind.PUT))
 
         def on_query(query: Any) -> None:
             attachment = query.attachment
@@ -224,6 +233,12 @@ class Bridge:
             keys.alive_all(self.robot), Callback(on_alive), history=True))
         self._info_queryable = self.session.declare_queryable(
             keys.info(self.robot, self.process), Callback(on_info), complete=True)
+        # what components in the other processes subscribe to counts as subscribed here,
+        # so that suppliers build the optional forms they would build in one process
+        for port in system.peer_ports:
+            if port.direction is Direction.SUBSCRIBES and port.domain in (None, self.robot) \
+                    and any(fnmatchcase(port.name, p) for p in self.parameters.Export):
+                self._interests.append(system.channel.declare_interest(self.robot, port.name))
         self._unwatch = system.registry.watch(self._on_name)
         for name in system.registry.list(f"{self.robot}/"):
             self._on_name(name, system.registry.try_resolve(name))
@@ -264,6 +279,9 @@ class Bridge:
             except BaseException:  # noqa: BLE001 - cancelled, or already reported
                 pass
         self._tasks.clear()
+        for interest in self._interests:
+            interest.close()
+        self._interests.clear()
         session, self.session = self.session, None
         for name in list(self._remote):
             self._drop_remote(name, None, "this process's bridge stopped")
@@ -360,6 +378,13 @@ class Bridge:
                         else "")
 
     def _import(self, name: str, payload: bytes) -> None:
+        if not self._imports(name):
+            return
+        # any subscription, observers included (a recorder or a digest wants it too);
+        # the channel caches the match per name
+        if not self.system.channel._match(self.robot, name):
+            self.unwanted += 1  # nobody here would receive it: do not even decode it
+            return
         try:
             event = Event.decode(payload)
         except wire.WireError as exc:
@@ -376,8 +401,6 @@ class Bridge:
             return
         if sender == self.process:
             self.echoes += 1
-            return
-        if not self._imports(name):
             return
         if not self._accepted(name, type(event.body)):
             self._reject("wrong-type", f"{name} from {event.origin} carries "
@@ -430,6 +453,7 @@ class Bridge:
                     complete=True)
                 token = self.session.liveliness().declare_token(keys.alive_name(
                     self.robot, name, self.process, interface_name(obj.interface)))
+                self.traffic.tokens_declared += 1
                 self._served[name] = (queryable, token, obj.interface)
         except Exception:  # a watcher must not raise inside bind
             log.exception("bridge: exporting %s failed", full)
@@ -437,6 +461,7 @@ class Bridge:
     def _withdraw(self, name: str) -> None:
         served = self._served.pop(name, None)
         if served is not None:
+            self.traffic.tokens_declared += 1  # its withdrawal is a change the others see
             queryable, token, _ = served
             for entity in (token, queryable):
                 try:
@@ -646,6 +671,7 @@ class Bridge:
         query or reply. (A call in flight is a counted message, not business.)"""
         return ((self._data is None or self._data.pending() == 0)
                 and (self._queries is None or self._queries.pending() == 0)
+                and (self._alive is None or self._alive.pending() == 0)
                 and self.traffic.replies_unprocessed == 0)
 
     def statistics(self) -> dict[str, Any]:
@@ -661,6 +687,7 @@ class Bridge:
             "import": self._data.statistics() if self._data is not None else {},
             "rejected": dict(self.rejected),
             "echoes": self.echoes,
+            "unwanted": self.unwanted,
             "served": sorted(self._served),
             "remote_names": {name: sorted(offers) for name, offers in self._remote.items()},
             "calls_served": self.served_calls,

@@ -21,7 +21,9 @@ the first Launcher entry, the vehicle); the others **follow**. Every member runs
    received. Counters are read before idleness is checked, and counted on arrival (on
    Zenoh's thread), so an idle report is never stale by a message: the run is quiescent
    when every report is idle and, for every pair of members, what one sent the other has
-   received. Otherwise the master probes again.
+   received (served names appearing and going, liveliness tokens, count too: a component
+   waiting for a name must see it at the instant it would in one process). Otherwise
+   the master probes again.
 3. *Grant*: the master moves every clock to the earliest next timer of any member
    (``advance``), each member runs its timers due then, and the cycle repeats. When
    nothing the master sent or received changed since the last grant and no follower had
@@ -58,6 +60,8 @@ log = logging.getLogger("afa.bridge.time")
 
 #: Real seconds between welcome messages while a follower has not answered.
 _WELCOME_EVERY = 0.25
+#: Real seconds without quiescence after which the master logs its counters.
+_STALL_WARNING = 10.0
 
 
 class SteppedClock(VirtualClock):
@@ -105,6 +109,8 @@ class Traffic:
         self.replies_sent: Counter[str] = Counter()
         self.replies_received: Counter[str] = Counter()
         self.replies_unprocessed = 0
+        self.tokens_declared = 0  # name tokens declared and withdrawn by this process
+        self.tokens_seen: Counter[str] = Counter()  # per process, its name tokens' changes
 
     def saw(self, sender: str, seq: int) -> None:
         with self._lock:
@@ -123,7 +129,8 @@ class Traffic:
         with self._lock:
             return {"exported": self.exported, "seen": dict(self.seen),
                     "qsent": dict(self.queries_sent), "qrecv": dict(self.queries_received),
-                    "rsent": dict(self.replies_sent), "rrecv": dict(self.replies_received)}
+                    "rsent": dict(self.replies_sent), "rrecv": dict(self.replies_received),
+                    "tsent": self.tokens_declared, "tseen": dict(self.tokens_seen)}
 
 
 def lockstep_for(bridge: Bridge, system: Any, configuration: Any,
@@ -235,6 +242,8 @@ class TimeMaster(LockStep):
         self._reports_in: asyncio.Event = asyncio.Event()
         self._anchor: tuple[float, float, float] | None = None
         self._holding = False  # the run is ending: no more grants
+        self._stall_since: float | None = None
+        self._stall_reported = False
         self._quiescent: asyncio.Event = asyncio.Event()
 
     async def join(self) -> None:
@@ -330,7 +339,9 @@ class TimeMaster(LockStep):
                     continue
                 mine = await self.quiet()
                 if not self._consistent(mine, reports):
+                    self._stalled(mine, reports)
                     continue
+                self._stall_since = None
                 nexts = {f: r.get("next") for f, r in reports.items()}
             if self._holding:  # everyone has finished this instant: hold time here
                 self._quiescent.set()
@@ -382,6 +393,18 @@ class TimeMaster(LockStep):
             except TimeoutError:
                 pass
 
+    def _stalled(self, mine: dict[str, Any], reports: dict[str, dict[str, Any]]) -> None:
+        """Say so (once) when quiescence has not come for a while: a message counted as
+        sent that never arrives would otherwise stop time without a word."""
+        now = asyncio.get_running_loop().time()
+        if self._stall_since is None:
+            self._stall_since = now
+        elif now - self._stall_since > _STALL_WARNING and not self._stall_reported:
+            self._stall_reported = True
+            log.warning("lock-step: no quiescence at t=%.6f for %.0f s; counters: %s",
+                        self.clock.monotonic(), now - self._stall_since,
+                        json.dumps({self.bridge.process: mine, **reports}))
+
     def _consistent(self, mine: dict[str, Any], reports: dict[str, dict[str, Any]]) -> bool:
         members = {self.bridge.process: mine, **reports}
         for sender, s in members.items():
@@ -394,6 +417,8 @@ class TimeMaster(LockStep):
                     return False
                 if r["rrecv"].get(sender, 0) != s["rsent"].get(receiver, 0):
                     return False
+                if r.get("tseen", {}).get(sender, 0) != s.get("tsent", 0):
+                    return False  # a served name appearing or going is still on its way
         return True
 
     async def _activity(self, failure: asyncio.Future[None]) -> None:

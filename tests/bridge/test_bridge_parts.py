@@ -247,3 +247,20 @@ def test_top_renders_the_launcher_table() -> None:
     assert "peers autonomy; events out 5" in text and "refused commands 1" in text
     assert text.splitlines()[-1].split() == ["gps", "GpsSokkia", "running", "ok", "0", "0", "5",
                                              "10.0%"]
+
+
+def test_an_interest_makes_an_event_subscribed_and_receives_nothing() -> None:
+    from afa import EventChannel
+    from tests.bridge.parts import Count
+
+    channel = EventChannel()
+    publisher = channel.offer("Raptor", "Laser11Array")
+    watcher = channel.observe()
+    assert not publisher.subscribed  # observers do not ask for optional forms
+    interest = channel.declare_interest("Raptor", "Laser11*")  # another process's subscriber
+    assert publisher.subscribed and channel.subscribed("Raptor", "Laser11Array")
+    publisher.publish(Count(value=1))
+    assert interest.get_nowait() is None and interest.statistics().dropped == 0
+    assert watcher.get_nowait() is not None
+    interest.close()
+    assert not publisher.subscribed
