@@ -31,6 +31,7 @@ from afa.config.parameters import Parameters, param
 from afa.errors import (
     AfaError,
     ChannelClosed,
+    CommandRefused,
     ComponentError,
     ConfigError,
     EDevIO,
@@ -57,7 +58,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "AfaError", "Backoff", "ByteStream", "Catalog", "ChannelClosed", "Client", "Clock",
-    "Component", "ComponentError", "ConfigError", "Context", "DecoderStatistics", "EDevIO",
+    "CommandRefused", "Component", "ComponentError", "ConfigError", "Context",
+    "DecoderStatistics", "EDevIO",
     "EOutOfBounds", "ETimeOut", "Event", "EventChannel", "Fault", "Health", "Input",
     "InterfaceError", "Invoker", "LatestSlot", "LocalInvoker", "NameAlreadyBound",
     "NameNotFound", "NameRegistry", "NamingError", "Observer", "Output", "Overflow",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import inspect
 import json
 import logging
 import signal
@@ -28,9 +29,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()),
                         format="%(asctime)s %(levelname)-7s %(name)s: %(message)s")
-    handler: Callable[[argparse.Namespace], int] = args.handler
+    handler: Callable[[argparse.Namespace], Any] = args.handler
     try:
-        return handler(args)
+        if inspect.iscoroutinefunction(handler):  # the text tools (afa.tools)
+            return asyncio.run(handler(args))  # type: ignore[no-any-return]
+        return handler(args)  # type: ignore[no-any-return]
     except KeyboardInterrupt:
         return EXIT_OK
     except ConfigError as exc:
@@ -82,6 +85,9 @@ def _parser() -> argparse.ArgumentParser:
     from afa.console import add_arguments as add_console_arguments
 
     add_console_arguments(run)
+    from afa.bridge.runner import add_run_arguments
+
+    add_run_arguments(run)
     run.set_defaults(handler=_run)
 
     _log_parsers(commands)
@@ -115,6 +121,10 @@ def _parser() -> argparse.ArgumentParser:
     decode.add_argument("device", help="device codec: " + ", ".join(_decoders()))
     decode.add_argument("file", type=Path, help="raw capture ('-' for stdin)")
     decode.set_defaults(handler=_decode)
+
+    from afa.tools.cli import add_parsers as add_tool_parsers
+
+    add_tool_parsers(commands)
     return parser
 
 
@@ -363,8 +373,12 @@ async def _run_system(args: argparse.Namespace) -> int:
         clock = VirtualClock(pace=args.realtime_factor)
     else:
         clock = WallClock()
+    from afa.bridge.runner import lockstep_clock, system_options
+    from afa.bridge.runner import summary as bridge_summary
+
+    clock = lockstep_clock(args) or clock  # a process group in lock-step (decision 0011)
     simulation = None
-    options: dict[str, Any] = {"strict": args.strict, "clock": clock}
+    options: dict[str, Any] = {"strict": args.strict, "clock": clock, **system_options(args)}
     if args.sim:
         simulation_cls = _simulator()
         world = _world_path(args.world) if args.world else simulation_cls.default_world()
@@ -372,6 +386,8 @@ async def _run_system(args: argparse.Namespace) -> int:
                                     teleop=args.teleop)
         options["devices"] = simulation.device_for
     system = System.from_xml(args.config, **options)
+    if simulation is not None and args.process and not simulation.fakes:
+        simulation = None  # its devices run in another process group, and so does the world
     if simulation is not None:
         simulation.attach(system)
     recorder = None
@@ -406,6 +422,7 @@ async def _run_system(args: argparse.Namespace) -> int:
             summary = _summary(system, clock_start, wall_start)
             if recorder is not None:
                 summary["recording"] = {"file": str(args.record), **recorder.statistics()}
+            summary.update(bridge_summary(system))
             if simulation is not None:
                 summary.update(simulation.summary())
                 if not simulation.teleop:

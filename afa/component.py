@@ -55,6 +55,7 @@ from afa.codec import StreamDecoder
 from afa.config.parameters import Parameters
 from afa.errors import ComponentError, EDevIO
 from afa.events import EventChannel, Overflow
+from afa.meter import LoopMeter
 from afa.naming import NameRegistry, join_name
 from afa.polling import (
     LatestSlot,
@@ -130,6 +131,7 @@ class Context:
     base_dir: Path = field(default_factory=Path.cwd)
     polls: PollLayer | None = None
     section: Callable[[str], Parameters | None] = _no_sections
+    meter: LoopMeter | None = None  # loop-time accounting (afa top), when the system meters
 
 
 @dataclass(frozen=True)
@@ -264,6 +266,12 @@ class Component(Generic[P]):
         """Counters for health displays and run summaries; extend in subclasses."""
         return {port.name: port.statistics() for port in self._inputs}
 
+    def traffic(self) -> dict[str, int]:
+        """Events this component received (delivered to its handlers) and published, over
+        every life (the Launcher table's events in and out)."""
+        return {"in": sum(port.received for port in self._inputs),
+                "out": sum(port.published for port in self._outputs)}
+
     # -- context -----------------------------------------------------------------------
     @property
     def context(self) -> Context:
@@ -342,7 +350,7 @@ class Component(Generic[P]):
         self._healthy, self._health_detail = True, ""
         context = self.context
         try:
-            async with Scope() as scope:
+            async with Scope(context.meter, self.name) as scope:
                 self._scope = scope
                 for output in self._outputs:
                     output._publisher = context.channel.offer(self.robot, output.name)

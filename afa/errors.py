@@ -19,8 +19,11 @@ builtin it behaves like, so callers can catch either::
     │                                          ``failures`` maps component name -> error
     ├── TaskFailed             (RuntimeError)  a task of the system (a fake device, the
     │                                          simulation, a bridge) failed; ``owner``
-    └── RealDeviceForbidden    (PermissionError) a real device was opened where real
-                                               devices are forbidden (tests)
+    ├── RealDeviceForbidden    (PermissionError) a real device was opened where real
+    │                                          devices are forbidden (tests)
+    └── CommandRefused         (PermissionError) a remote call that would move the
+                                               vehicle came from a peer not allowed to
+                                               command it (the bridge)
 
 Foreign exceptions (pyserial, lxml, pydantic, OSError from sockets) are translated at
 the boundary where they enter afa, with ``raise ... from exc`` so the cause is kept.
@@ -110,3 +113,8 @@ class TaskFailed(AfaError, RuntimeError):
 class RealDeviceForbidden(AfaError, PermissionError):
     """A real serial port or socket was to be opened where real devices are forbidden
     (``System(real_devices=False)`` or ``AFA_FORBID_REAL_DEVICES=1``, as in afa's tests)."""
+
+
+class CommandRefused(AfaError, PermissionError):
+    """A call that would move the vehicle came over the bridge from a peer that the
+    serving process's ``Bridge/AllowCommandFrom`` does not name."""

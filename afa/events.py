@@ -227,6 +227,15 @@ class Subscription:
         return f"<Subscription {self.domain}/{self.type} {self.statistics()}>"
 
 
+class _Interest(Subscription):
+    """A subscription that receives nothing (:meth:`EventChannel.declare_interest`)."""
+
+    __slots__ = ()
+
+    def _push(self, event: Event) -> None:
+        pass
+
+
 class Publisher:
     """A supplier's offer of ``(domain, type)``: publish without pattern matching."""
 
@@ -298,6 +307,19 @@ class EventChannel:
         subscription = self.subscribe(domain, type, maxsize=maxsize, policy=policy)
         subscription.observer = True
         return subscription
+
+    def declare_interest(self, domain: str, type: str) -> Subscription:
+        """An *interest*: it makes ``(domain, type)`` :meth:`subscribed` (suppliers build
+        their optional forms for it) but receives nothing. A bridge declares the
+        subscriptions of components in other processes this way; ``close()`` withdraws
+        it."""
+        if self._closed:
+            raise ChannelClosed("the event channel is closed")
+        self._order += 1
+        interest = _Interest(self, domain, type, 1, Overflow.DROP_NEWEST, self._order)
+        self._subscriptions.append(interest)
+        self._changed()
+        return interest
 
     # -- suppliers -------------------------------------------------------------------
     def offer(self, domain: str, type: str) -> Publisher:

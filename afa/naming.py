@@ -3,19 +3,24 @@
 Objects are bound at ``<Robot>/<Name>`` (``Raptor/Gps``, ``Raptor/EventChannel``).
 :meth:`NameRegistry.wait_resolve` waits until a name is bound, so components may start
 in any order. A binding remembers its owner, and :meth:`NameRegistry.unbind_owner`
-removes every name a stopping server bound.
+removes every name a stopping server bound. :meth:`NameRegistry.watch` tells a watcher
+(a bridge exporting names) of every bind and unbind.
 """
 
 from __future__ import annotations
 
 import asyncio
 from collections import defaultdict
+from collections.abc import Callable
 from typing import Any
 
 from afa.clock import Clock, WallClock
 from afa.errors import NameAlreadyBound, NameNotFound
 
-__all__ = ["NameRegistry", "join_name"]
+__all__ = ["NameRegistry", "join_name", "Watcher"]
+
+#: ``watcher(name, obj)``: ``name`` was bound to ``obj``, or unbound (``obj`` is None).
+Watcher = Callable[[str, Any], None]
 
 
 def join_name(robot: str, name: str) -> str:
@@ -38,6 +43,14 @@ class NameRegistry:
         self._objects: dict[str, Any] = {}
         self._owners: dict[str, object] = {}
         self._waiters: defaultdict[str, list[asyncio.Future[Any]]] = defaultdict(list)
+        self._watchers: list[Watcher] = []
+
+    def watch(self, watcher: Watcher) -> Callable[[], None]:
+        """Call ``watcher(name, obj)`` after every bind or rebind and ``watcher(name,
+        None)`` after every unbind; returns a function that stops watching. A watcher
+        must not raise (it runs inside bind and unbind)."""
+        self._watchers.append(watcher)
+        return lambda: self._watchers.remove(watcher) if watcher in self._watchers else None
 
     def bind(self, name: str, obj: Any, *, owner: object = None) -> None:
         """Bind ``name``; raises NameAlreadyBound if it is bound."""
@@ -55,6 +68,8 @@ class NameRegistry:
             raise NameNotFound(f"{name} is not bound")
         del self._objects[name]
         self._owners.pop(name, None)
+        for watcher in list(self._watchers):
+            watcher(name, None)
 
     def unbind_owner(self, owner: object) -> list[str]:
         """Remove every name bound by ``owner``; returns them."""
@@ -109,3 +124,5 @@ class NameRegistry:
         for future in self._waiters.pop(name, []):
             if not future.done():
                 future.set_result(obj)
+        for watcher in list(self._watchers):
+            watcher(name, obj)

@@ -59,6 +59,8 @@ class PortInfo:
     domain: str | None = None  # None: the system's robot
     #: the IDL classes behind ``types`` (events only), for subtype checks
     classes: tuple[type, ...] = field(default=(), compare=False)
+    #: the process group running the component ("": this process)
+    process: str = field(default="", compare=False)
 
     @property
     def label(self) -> str:
@@ -73,10 +75,11 @@ def interface_name(interface: type[Interface]) -> str:
 class Output(Generic[T]):
     """A declared publication. ``publish`` works while the component runs."""
 
-    __slots__ = ("owner", "name", "type", "enabled", "_publisher")
+    __slots__ = ("owner", "name", "type", "enabled", "published", "_publisher")
 
     def __init__(self, owner: str, name: str, type: type[T], enabled: bool = True) -> None:
         self.owner, self.name, self.type, self.enabled = owner, name, type, enabled
+        self.published = 0  # events published through this port, every life
         self._publisher: Publisher | None = None
 
     @property
@@ -97,6 +100,7 @@ class Output(Generic[T]):
         publisher = self._publisher
         if publisher is None:
             raise ComponentError(f"{self.owner}: {self.name} published while not running")
+        self.published += 1
         return publisher.publish(body, origin=self.owner)
 
     def info(self) -> PortInfo:
@@ -303,4 +307,6 @@ class Catalog:
 
     def as_dicts(self) -> list[dict[str, Any]]:
         return [{"component": p.component, "direction": p.direction.value, "name": p.name,
-                 "types": list(p.types), "domain": p.domain} for p in self.ports]
+                 "types": list(p.types), "domain": p.domain,
+                 **({"process": p.process} if p.process else {})}  # another process's port
+                for p in self.ports]

@@ -16,6 +16,11 @@
   :meth:`run` raises :class:`~afa.errors.TaskFailed`, and so does leaving the
   ``async with`` block if nobody has seen it yet.
 - **The catalog** (:meth:`catalog`): every port of every component, from construction.
+- **Services** (:meth:`add_service`): something with ``start(system)`` and ``stop()``
+  that lives as long as the running system, around its components: a bridge to other
+  processes. Started before the components, stopped after them.
+- **Loop-time accounting** (``meter=True``, :mod:`afa.meter`): each component's share of
+  the loop's time, for ``afa top``.
 - **Devices**: ``devices`` maps component names to factories that open a fake device
   or an emulator in place of the real one (a name that is no component is an error);
   ``real_devices=False`` (or the environment variable ``AFA_FORBID_REAL_DEVICES=1``,
@@ -29,20 +34,21 @@ import logging
 import os
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from afa.clock import Clock, WallClock
 from afa.component import Component, Context, Health, PublishServerReactor, RestartPolicy, State
 from afa.errors import ComponentError, StartupError, TaskFailed
 from afa.events import Event, EventChannel, Overflow, Subscription
+from afa.meter import LoopMeter
 from afa.naming import NameRegistry, join_name
 from afa.polling import LocalInvoker, PollLayer, current_caller, proxy_for
-from afa.ports import Catalog
+from afa.ports import Catalog, PortInfo
 from afa.tasks import Scope, TaskGroup
 from afa.transport import DeviceFactory, DeviceOpener
 from idl._base import Interface
 
-__all__ = ["System", "Observer", "FORBID_REAL_DEVICES"]
+__all__ = ["System", "Observer", "Service", "FORBID_REAL_DEVICES"]
 
 InterfaceT = TypeVar("InterfaceT", bound=Interface)
 log = logging.getLogger("afa.system")
@@ -53,6 +59,21 @@ FORBID_REAL_DEVICES = "AFA_FORBID_REAL_DEVICES"
 #: ``provider(component)``: a device factory to use in place of ``component``'s real
 #: device, or None (a simulation provides emulators this way).
 DeviceProvider = Callable[[Component[Any]], DeviceFactory | None]
+
+
+class Service(Protocol):
+    """Something that runs as long as a system runs (:meth:`System.add_service`)."""
+
+    name: str
+
+    async def start(self, system: System) -> None:
+        """Called when the system starts, before its components (the task group exists).
+        An exception fails the start (StartupError naming the service)."""
+        ...
+
+    async def stop(self) -> None:
+        """Called when the system stops, after its components; must not raise."""
+        ...
 
 
 class Observer:
@@ -120,8 +141,13 @@ class System:
         start_delays: Mapping[str, float] | None = None,
         base_dir: str | Path | None = None,
         real_devices: bool | None = None,
+        process: str = "main",
+        meter: bool = False,
+        start_after: float = 0.0,
     ) -> None:
         self.robot = robot
+        self.process = process  # this process's group name (origin prefix across a bridge)
+        self.meter: LoopMeter | None = LoopMeter() if meter else None
         self.clock: Clock = clock or WallClock()
         self.channel = EventChannel(self.clock)
         self.registry = NameRegistry(self.clock)
@@ -134,6 +160,9 @@ class System:
         self.devices = DeviceOpener(overrides, allow_real=real_devices, clock=self.clock)
         self.restart_policy = restart_policy
         self.start_delays = dict(start_delays or {})
+        #: clock seconds to wait before starting the first component (a process group of
+        #: a split configuration starts its part of the Launcher when one process would)
+        self.start_after = start_after
         self.base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
         self.configuration: Any = None  # the validated Configuration, when built from XML
         self.components: dict[str, Component[Any]] = {}
@@ -143,9 +172,15 @@ class System:
         self._supervisors: dict[str, asyncio.Task[None]] = {}
         self._tasks: TaskGroup | None = None
         self._observers: list[Observer] = []
+        self._services: list[Service] = []
+        #: the ports of the components other processes run (a split configuration), so
+        #: that the catalog describes the whole distributed system
+        self.peer_ports: list[PortInfo] = []
+        self._started_services: list[Service] = []
         self._running = False
         self._stopped = asyncio.Event()
         self._failed = asyncio.Event()
+        self._stop_requested = asyncio.Event()
         for component in components:
             self.add(component)
         unknown = sorted(set(overrides) - set(self.components))
@@ -178,7 +213,8 @@ class System:
             if factory is not None:
                 self.devices.overrides[component.name] = factory
         component._attach(Context(self.robot, self.channel, self.registry, self.clock,
-                                  self.devices, self.base_dir, self.polls, self._section))
+                                  self.devices, self.base_dir, self.polls, self._section,
+                                  self.meter))
         if self._running:
             self._launch(component)
         return component
@@ -189,10 +225,34 @@ class System:
         sets = sections.get(name)
         return None if not sets else next(iter(sets.values()))
 
+    def add_service(self, service: Service) -> Service:
+        """Run ``service`` while the system runs (before start). Raises ComponentError
+        while running."""
+        if self._running:
+            raise ComponentError(f"add the service {service.name} before the system starts")
+        self._services.append(service)
+        return service
+
+    @property
+    def services(self) -> list[Service]:
+        return list(self._services)
+
+    def enable_meter(self) -> LoopMeter:
+        """Turn loop-time accounting on (before start); returns the meter."""
+        if self.meter is None:
+            if self._running:
+                raise ComponentError("turn the meter on before the system starts")
+            self.meter = LoopMeter()
+            for component in self.components.values():
+                if component._context is not None:
+                    component._context.meter = self.meter
+        return self.meter
+
     def catalog(self) -> Catalog:
-        """Every declared port of every component (available before start)."""
-        return Catalog([port for c in self.components.values() for port in c.ports()],
-                       self.robot)
+        """Every declared port of every component (available before start), with those
+        of the other processes of a split configuration (``PortInfo.process`` set)."""
+        return Catalog([port for c in self.components.values() for port in c.ports()]
+                       + self.peer_ports, self.robot)
 
     # -- running -------------------------------------------------------------------------
     async def __aenter__(self) -> System:
@@ -218,11 +278,25 @@ class System:
         self._running = True
         self._stopped = asyncio.Event()
         self._failed = asyncio.Event()
-        self._tasks = TaskGroup(f"system {self.robot}", on_failure=self._task_failed)
+        self._stop_requested = asyncio.Event()
+        self._tasks = TaskGroup(f"system {self.robot}", on_failure=self._task_failed,
+                                meter=self.meter)
         for observer in self._observers:
             self._tasks.spawn(observer.run(), owner=f"observer {observer.name}")
         self.registry.rebind(join_name(self.robot, "EventChannel"), self.channel, owner=self)
         failures: dict[str, BaseException] = {}
+        for service in self._services:
+            try:
+                await service.start(self)
+            except Exception as exc:
+                failures[service.name] = exc
+                break
+            self._started_services.append(service)
+        if failures:
+            await self.stop(raise_failures=False)
+            raise StartupError(failures)
+        if self.start_after > 0:
+            await self.clock.sleep(self.start_after)
         for component in list(self.components.values()):
             self._launch(component)
             while component.state in (State.CREATED, State.STARTING):
@@ -245,6 +319,12 @@ class System:
             return
         for name in reversed(list(self._supervisors)):
             await self.stop_component(name)
+        while self._started_services:
+            service = self._started_services.pop()
+            try:
+                await service.stop()
+            except Exception:
+                log.exception("service %s failed to stop", service.name)
         for observer in self._observers:
             observer.close()
         self._observers.clear()
@@ -261,14 +341,30 @@ class System:
                   until: asyncio.Event | None = None) -> None:
         """Run until ``duration`` clock seconds have passed (None: until stopped), or
         ``until`` is set (a simulated mission finished, say). Raises TaskFailed as soon as
-        a task of the system (not of a component) fails."""
+        a task of the system (not of a component) fails.
+
+        When the duration or ``until`` ends it, services with a ``finish_instant()``
+        coroutine are awaited (a lock-step bridge lets every process finish the last
+        instant), so that what happens at the end time is the same whether the system is
+        one process or several."""
         self._raise_failures()
         waiter = self._stopped.wait() if duration is None else self.clock.sleep(duration)
-        waiters = [waiter, self._failed.wait()]
+        waiters = [waiter, self._failed.wait(), self._stop_requested.wait()]
         if until is not None:
             waiters.append(until.wait())
         await _first_of(*waiters)
         self._raise_failures()
+        if (duration is not None or until is not None) and not self._stop_requested.is_set():
+            for service in self._started_services:
+                finish = getattr(service, "finish_instant", None)
+                if finish is not None:
+                    await _first_of(finish(), self._failed.wait())
+            self._raise_failures()
+
+    def request_stop(self) -> None:
+        """Make :meth:`run` return now (a time master ended a split run; an operator's
+        stop). The caller then stops the system as usual."""
+        self._stop_requested.set()
 
     def _raise_failures(self) -> None:
         if len(self.failures) > self._reported:

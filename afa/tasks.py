@@ -25,7 +25,10 @@ import asyncio
 import contextvars
 import logging
 from collections.abc import Callable, Coroutine
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    from afa.meter import LoopMeter
 
 __all__ = ["TaskGroup", "Scope", "spawn", "current_group", "loop_service", "TaskFailure",
            "first_error"]
@@ -62,10 +65,12 @@ class TaskGroup:
     failure.
     """
 
-    def __init__(self, name: str = "afa", *, on_failure: FailureHandler | None = None) -> None:
+    def __init__(self, name: str = "afa", *, on_failure: FailureHandler | None = None,
+                 meter: LoopMeter | None = None) -> None:
         self.name = name
         self.failures: list[TaskFailure] = []
         self._on_failure = on_failure
+        self.meter = meter  # accounts each task's steps to its owner (afa top)
         self._tasks: set[asyncio.Task[Any]] = set()
         self._context = contextvars.copy_context()
         self._context.run(_CURRENT.set, self)
@@ -81,6 +86,8 @@ class TaskGroup:
         if self._closed:
             coroutine.close()
             raise RuntimeError(f"task group {self.name} is closed; cannot start {owner}'s task")
+        if self.meter is not None:
+            coroutine = self.meter.wrap(coroutine, owner)
         task = asyncio.get_running_loop().create_task(
             coroutine, name=name or owner, context=self._context if context is None else context)
         self._tasks.add(task)
@@ -141,8 +148,10 @@ class Scope:
     that fails cancels the others and the body, and its exception leaves the block
     (wrapped in an exception group, as :class:`asyncio.TaskGroup` does)."""
 
-    def __init__(self) -> None:
+    def __init__(self, meter: LoopMeter | None = None, account: str = "") -> None:
         self._group = asyncio.TaskGroup()
+        self._meter = meter
+        self._account = account
 
     async def __aenter__(self) -> Scope:
         await self._group.__aenter__()
@@ -152,6 +161,8 @@ class Scope:
         await self._group.__aexit__(*exc_info)
 
     def spawn(self, coroutine: Coroutine[Any, Any, T], name: str) -> asyncio.Task[T]:
+        if self._meter is not None:
+            coroutine = self._meter.wrap(coroutine, self._account or name)
         return self._group.create_task(coroutine, name=name)
 
 

@@ -241,6 +241,7 @@ class RaptorSimulation:
         self._pose_errors = RunningError()  # constant memory however long the run
         self._last_pose_error: tuple[float, float] | None = None  # for displays
         self._waypoints_utm: list[list[float]] | None = None
+        self._digests: dict[str, Any] = {}  # per event name: one stream's digest
         self.fakes: list[Any] = []
         self.endpoints: dict[str, str] = {}  # component -> pty path or host:port
         self._shared: dict[str, Any] = {}
@@ -542,9 +543,16 @@ class RaptorSimulation:
     # -- observation -------------------------------------------------------------------------
     def _observe(self, event: Event) -> None:
         digest = self._digest
-        digest.update(f"{event.type}|{event.time:.6f}|".encode())
+        head = f"{event.type}|{event.time:.6f}|".encode()
         body = event.body
-        digest.update(body.fingerprint())  # arrays by their SHA-256
+        fingerprint = body.fingerprint()  # arrays by their SHA-256
+        digest.update(head)
+        digest.update(fingerprint)
+        stream = self._digests.get(event.type)
+        if stream is None:
+            stream = self._digests[event.type] = hashlib.sha256()
+        stream.update(head)
+        stream.update(fingerprint)
         if isinstance(body, PoseTransformIDL) and event.type == "Pose":
             self._pose_error(body)
         elif isinstance(body, ArcVoteIDL) and body.behaviour == "ObstacleDetection":
@@ -636,6 +644,9 @@ class RaptorSimulation:
             "pose_error": pose_error,
             "event_digest": self._digest.hexdigest(),
             "maps": map_summary(self._system, self) if self._system is not None else None,
+            # each event name's stream alone: equal in a split run, whose processes
+            # interleave events of one instant differently (decision 0011)
+            "event_digests": {name: d.hexdigest() for name, d in sorted(self._digests.items())},
             "vehicle": {"east": round(self.state.east, 3), "north": round(self.state.north, 3),
                         "heading_deg": round(self.state.heading_deg, 2),
                         "speed": round(self.state.speed, 3)},

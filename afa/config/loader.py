@@ -12,23 +12,28 @@ from __future__ import annotations
 
 import difflib
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pydantic import ValidationError
+from pydantic import ValidationError, field_validator
 
+from afa.bridge.parameters import BridgeParameters
 from afa.config.miro import ParameterSet, Section, read_document
 from afa.config.parameters import Parameters, param
 from afa.errors import AfaError, ConfigError
 
 __all__ = [
     "Configuration", "load_configuration", "RobotParameters", "LauncherParameters",
-    "LauncherEntry", "DEFAULT_INSTANCE",
+    "LauncherEntry", "DEFAULT_INSTANCE", "MAIN_PROCESS",
 ]
 
 #: Key of a section's default (unnamed) parameter set in ``Configuration.sections``.
 DEFAULT_INSTANCE = "default"
+#: The process group of Launcher entries with an empty ``Process``.
+MAIN_PROCESS = "main"
+_PROCESS_NAME = re.compile(r"[A-Za-z0-9_.-]+")
 
 
 class RobotParameters(Parameters):
@@ -50,6 +55,21 @@ class LauncherEntry(Parameters):
     Period: float = param(0.0, unit="s",
                           description="Delay before launching the next component (dT)")
     Restart: bool = param(True, description="Restart the component with backoff when it fails")
+    Process: str = param("", description="Process group: `afa run CONFIG --process NAME` runs "
+                                         "only the entries of group NAME ('' is the group "
+                                         "'main') and bridges to the others (afa addition)")
+
+    @field_validator("Process")
+    @classmethod
+    def _process_name(cls, value: str) -> str:
+        if value and not _PROCESS_NAME.fullmatch(value):
+            raise ValueError("a process group name is letters, digits, '_', '-' or '.'")
+        return value
+
+    @property
+    def group(self) -> str:
+        """The process group's name (``main`` for an empty ``Process``)."""
+        return self.Process or MAIN_PROCESS
 
 
 class LauncherParameters(Parameters):
@@ -59,9 +79,9 @@ class LauncherParameters(Parameters):
     Components: list[LauncherEntry] = param([], description="Components in start order")
 
 
-#: The framework's own sections, always known.
+#: The framework's own sections, always known (the bridge's model imports no network code).
 _BUILTIN: dict[str, type[Parameters]] = {
-    model.miro_type: model for model in (RobotParameters, LauncherParameters)}
+    model.miro_type: model for model in (RobotParameters, LauncherParameters, BridgeParameters)}
 
 
 @dataclass(frozen=True)
@@ -76,6 +96,10 @@ class Configuration:
 
     def parameters(self, section: str, instance: str = "") -> Parameters:
         return self.sections[section][instance or DEFAULT_INSTANCE]
+
+    def processes(self) -> list[str]:
+        """The Launcher's process groups, in order of first appearance."""
+        return list(dict.fromkeys(entry.group for entry in self.launcher.Components))
 
     def as_dict(self) -> dict[str, dict[str, dict[str, Any]]]:
         """``{section: {instance: {parameter: value}}}`` with every effective value."""

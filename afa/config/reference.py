@@ -46,7 +46,8 @@ def reference_markdown() -> str:
     from afa import registry
     from afa.config import loader
 
-    modules = {loader.__name__} | {m.__module__ for m in registry.load_all_parameters().values()}
+    framework = {model.__module__ for model in loader._BUILTIN.values()}  # Robot, Bridge, ...
+    modules = framework | {m.__module__ for m in registry.load_all_parameters().values()}
     # every model of those modules: the plug-ins' own and the structs nested in them
     models = {name: model for name, model in parameter_types().items()
               if model.__module__ in modules}

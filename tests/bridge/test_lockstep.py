@@ -1,0 +1,110 @@
+"""Lock-step virtual time across processes (decision 0011): a split system sees every
+event and every poll at the virtual time one process would, the split ends cleanly and
+together, and a member that is missing or dies stops the run loudly."""
+
+from __future__ import annotations
+
+import pytest
+
+from afa.assembly import _global_start
+from afa.bridge.lockstep import SteppedClock, TimeMaster
+from afa.errors import ComponentError
+from tests.bridge.conftest import Peer
+from tests.bridge.parts import endpoint, free_port
+
+
+async def test_a_stepped_clock_moves_only_when_granted() -> None:
+    clock = SteppedClock(start=100.0)
+    fired: list[tuple[str, float]] = []
+    clock.call_at(2.0, lambda: fired.append(("b", clock.monotonic())))
+    clock.call_at(1.0, lambda: fired.append(("a", clock.monotonic())))
+    clock.call_at(1.0, lambda: fired.append(("a2", clock.monotonic())))
+    await clock.settle()
+    assert clock.monotonic() == 0.0 and fired == []  # idle is not a reason to move
+    assert clock.next_deadline() == 1.0
+    clock.grant(1.0)
+    assert fired == [("a", 1.0), ("a2", 1.0)] and clock.now() == 101.0
+    clock.grant(1.5)  # nothing due: time moves all the same
+    assert clock.monotonic() == 1.5 and clock.next_deadline() == 2.0
+    with pytest.raises(ComponentError, match="cannot go back"):
+        clock.grant(1.0)
+    with pytest.raises(ComponentError, match="cannot be resumed"):
+        clock.resume()
+
+
+def test_quiescence_needs_every_message_received() -> None:
+    master = TimeMaster.__new__(TimeMaster)
+    master.bridge = type("B", (), {"process": "m"})()  # type: ignore[assignment]
+
+    def report(exported: int, seen: dict[str, int], qsent: dict[str, int] | None = None,
+               qrecv: dict[str, int] | None = None) -> dict[str, object]:
+        return {"exported": exported, "seen": seen, "qsent": qsent or {},
+                "qrecv": qrecv or {}, "rsent": {}, "rrecv": {}}
+
+    mine = report(5, {"f": 3})
+    assert master._consistent(mine, {"f": report(3, {"m": 5})})
+    assert not master._consistent(mine, {"f": report(3, {"m": 4})})  # an event in flight
+    assert not master._consistent(mine, {"f": report(4, {"m": 5})})  # the other way
+    asking = report(5, {"f": 3}, qsent={"f": 1})
+    assert not master._consistent(asking, {"f": report(3, {"m": 5})})  # a call in flight
+    assert master._consistent(asking, {"f": report(3, {"m": 5}, qrecv={"m": 1})})
+
+
+def test_each_group_starts_its_components_when_the_whole_launcher_would() -> None:
+    class C:
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+    everyone = [C(n) for n in ("gps", "imu", "model", "plan", "arbiter")]
+    delays = {"gps": 0.5, "imu": 0.1, "model": 0.2, "plan": 0.0, "arbiter": 0.3}
+    first, mine = _global_start(everyone, delays, ["imu", "arbiter"])  # type: ignore[arg-type]
+    assert first == 0.5  # imu starts after gps's dT
+    # imu -> arbiter: imu's, model's and plan's dT; arbiter waits to the whole Launcher's end
+    assert mine == pytest.approx({"imu": 0.3, "arbiter": 0.3})
+    assert first + sum(mine.values()) == pytest.approx(sum(delays.values()))
+
+
+def run(role: str, process: str, *extra: str) -> Peer:
+    return Peer(["-m", "tests.bridge.peer", role, "--process", process, *extra])
+
+
+def test_a_split_system_sees_everything_when_one_process_would(peers: list[Peer]) -> None:
+    one = run("all", "main", "--clock", "virtual", "--duration", "6")
+    peers.append(one)
+    port = free_port()
+    a = run("ls-a", "a", "--clock", "stepped", "--members", "a,b", "--listen", endpoint(port),
+            "--duration", "6")
+    b = run("ls-b", "b", "--clock", "stepped", "--members", "a,b", "--connect", endpoint(port))
+    peers += [a, b]
+    assert one.wait() == 0 and a.wait() == 0 and b.wait() == 0, a.errors + b.errors
+    alone, master, follower = one.result(), a.result(), b.result()
+    # the same virtual times, values and order, whichever process each part ran in
+    assert follower["doubler.seen"] == [[t, v, s, "a/counter"] for t, v, s, _ in
+                                        alone["doubler.seen"]]
+    assert follower["poller.polled"] == alone["poller.polled"]  # getWait polls across
+    assert master["sink.doubled"] == [[t, v, "b/doubler"] for t, v, _ in
+                                      alone["sink.doubled"]]
+    assert master["t"] == follower["t"] == alone["t"] == 6.0  # ended together, at 6 s
+    stats = master["bridge"]["lockstep"]
+    assert stats["role"] == "master" and stats["grants"] > 0
+
+
+def test_a_missing_member_fails_the_start_with_a_message(peers: list[Peer]) -> None:
+    a = run("ls-a", "a", "--clock", "stepped", "--members", "a,b", "--listen",
+            endpoint(free_port()), "--duration", "5", "--join-timeout", "1")
+    peers.append(a)
+    assert a.wait() != 0
+    assert any("did not join within 1 s" in line for line in a.errors), a.errors
+
+
+def test_a_member_that_dies_stops_the_run_loudly(peers: list[Peer]) -> None:
+    port = free_port()
+    a = run("ls-a", "a", "--clock", "stepped", "--members", "a,b", "--listen", endpoint(port),
+            "--duration", "100000")
+    b = run("ls-b", "b", "--clock", "stepped", "--members", "a,b", "--connect", endpoint(port))
+    peers += [a, b]
+    a.wait_ready()
+    b.wait_ready()
+    b.kill()
+    assert a.wait() != 0
+    assert any("process b went away" in line for line in a.errors), a.errors
