@@ -36,7 +36,10 @@ def arcs() -> ArcSet:
 
 
 def params(**overrides) -> ObstacleAvoidanceParameters:
-    return ObstacleAvoidanceParameters(**{"VehicleRadius": 0.7, **overrides})
+    """The sweep's geometry alone: any obstacle within the horizon vetoes, unless a test
+    sets VetoDistance (configs/raptor.xml's 2.5 m leaves farther obstacles to the vote)."""
+    return ObstacleAvoidanceParameters(**{"VehicleRadius": 0.7, "VetoDistance": math.inf,
+                                          **overrides})
 
 
 _SCORERS: dict[tuple, ArcSweepScorer] = {}
@@ -106,7 +109,7 @@ def reference_walk(arcs, geometry, p, hazard, goodness, *, frame, offsets, thres
                 rough = max(rough, h * w)
             if s <= free:
                 good.append(float(goodness[i, j]))
-        results.append((math.isfinite(d_obs), d_obs, free, rough,
+        results.append((math.isfinite(d_obs) and d_obs <= p.VetoDistance, d_obs, free, rough,
                         sum(good) / len(good) if good else 0.0))
     return results
 
@@ -132,6 +135,9 @@ CASES = [
     (MapGeometry(10, 10, 0.5, 0.0, -2.5),
      dict(CurveMakingConst=0.01, DistFactor=10, MinDistDiscount=0.2, CostUnknownCells=True,
           VetoUnknownCells=True), (0.0,), BUMPER, 0.02, 0.01),
+    # the shipped veto distance: farther obstacles shorten the free distance, no veto
+    (MapGeometry(16, 16, 0.5, 0.0, -4.0),
+     dict(CurveMakingConst=0.05, VetoDistance=2.5), (0.0, 0.8, 1.6, 2.4), BUMPER, 0.03, 0.05),
 ]
 
 
