@@ -137,7 +137,7 @@ CASES = [
           VetoUnknownCells=True), (0.0,), BUMPER, 0.02, 0.01),
     # the shipped veto distance: farther obstacles shorten the free distance, no veto
     (MapGeometry(16, 16, 0.5, 0.0, -4.0),
-     dict(CurveMakingConst=0.05, VetoDistance=2.5), (0.0, 0.8, 1.6, 2.4), BUMPER, 0.03, 0.05),
+     dict(CurveMakingConst=0.05, VetoDistance=2.5), (0.0, 0.8, 1.6, 2.4), BUMPER, 0.01, 0.05),
 ]
 
 
