@@ -14,14 +14,21 @@ tests):
    centroid is where the mean elevation actually sits; the slope fit uses it, so the
    uneven 2-or-3 grouping does not bias slopes (up to 10 % at 0.2/0.5 otherwise).
 2. **Step hazard** of a known cell: ``step = max(max - min, max over known 8-neighbours
-   |elevation_n - elevation|)``. The within-cell spread catches a wall inside the
+   (elevation - elevation_n), 0)``. The within-cell spread catches a wall inside the
    cell; neighbour differences use mean elevations (not max - min across cells,
-   which would read a traversable 19° ramp as a 0.3 m step over a diagonal). With
+   which would read a traversable 19° ramp as a 0.3 m step over a diagonal). Only the
+   *higher* side of a step between cells is marked: a rock's or a trunk's own cells,
+   a ledge's or a ditch's lip, never the open ground in front of them (marking both
+   sides grew a 0.6 m trunk into a 2 m obstacle, which closed the gaps of a forest;
+   Obstacle Avoidance adds the vehicle's own radius). A ditch's floor is marked by the
+   sunken-cell rule below. With
    ``StepPercent`` 0 the hazard is binary, 1 when ``step >= T``; with ``StepPercent``
    1 it is graded, ``min(1, step / T)``: the step "as a percentage" of ``Stepheight``
    (which stays in millimetres).
 3. **Slope hazard**: a least-squares plane ``z = a·x + b·y + c`` through the known
-   cells of the 3×3 neighbourhood (at their centroids), which must hold at least three
+   cells of the 3×3 neighbourhood (at their centroids) less than a step above or below
+   the cell (a step is the step rule's; a fit across it would tilt every plane around
+   an obstacle into a slope hazard, the ring the step rule no longer marks), which must hold at least three
    cells not (nearly) on one line (the normal equations' determinant in cell units ≥
    0.25); angle = atan(√(a² + b²)); hazard ``min(1, angle / limit)``, graded so that
    the planner's cost rises with slope. Cells without a fit get no slope hazard.
@@ -373,11 +380,12 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     limit = np.where(far, rules.far_slope, rules.max_slope)
     tan_limit = np.tan(np.radians(limit))
 
-    # --- step
+    # --- step: only the higher side of a step is marked (see the module doc)
     around = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURS, (rows, cols))
-    differences = np.abs(around - elev)
+    differences = elev - around
     differences[np.isnan(differences)] = 0.0  # unknown neighbours add nothing
-    step = np.where(known, np.maximum(high - low, differences.max(axis=0)), np.nan)
+    step = np.where(known, np.maximum(high - low, np.maximum(differences.max(axis=0), 0.0)),
+                    np.nan)
     with np.errstate(invalid="ignore"):
         step_full = known & (step >= threshold)
     if rules.step_percent:
@@ -386,7 +394,7 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
         step_hazard = np.where(step_full, 1.0, 0.0)
 
     # --- slope
-    slope = _plane_slopes(elev, cells.offset_x, cells.offset_y, g, known)
+    slope = _plane_slopes(elev, cells.offset_x, cells.offset_y, g, known, threshold)
     with np.errstate(invalid="ignore"):
         slope_hazard = np.minimum(slope / limit, 1.0)
         slope_full = slope >= limit
@@ -441,13 +449,15 @@ def _goodness(cells: CoarseCells, rules: HazardRules, known: NDArray[np.bool_],
 
 
 def _plane_slopes(elev: FloatArray, offset_x: FloatArray, offset_y: FloatArray, g: float,
-                  known: NDArray[np.bool_]) -> FloatArray:
+                  known: NDArray[np.bool_], step: FloatArray) -> FloatArray:
     """Slope angle (deg) of the least-squares plane through the known cells of each
-    known cell's 3x3 neighbourhood; NaN where unknown or degenerate."""
+    known cell's 3x3 neighbourhood that lie less than a ``step`` above or below it;
+    NaN where unknown or degenerate."""
     shape = elev.shape
     centre = np.where(known, elev, 0.0)
     z = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURHOOD, shape) - centre  # relative
-    w = ~np.isnan(z)
+    with np.errstate(invalid="ignore"):
+        w = np.abs(z) < step  # NaN (unknown) compares False
     di = np.array([d[0] for d in NEIGHBOURHOOD], dtype=np.float64)[:, None, None]
     dj = np.array([d[1] for d in NEIGHBOURHOOD], dtype=np.float64)[:, None, None]
     # positions in cells, centroid-corrected; unknown cells weigh nothing
