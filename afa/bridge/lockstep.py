@@ -60,6 +60,7 @@ log = logging.getLogger("afa.bridge.time")
 
 #: Real seconds between welcome messages while a follower has not answered.
 _WELCOME_EVERY = 0.25
+_END_ACK_TIMEOUT = 5.0  # s of wall clock the master waits for followers to take the end
 #: Real seconds without quiescence after which the master logs its counters.
 _STALL_WARNING = 10.0
 
@@ -245,6 +246,7 @@ class TimeMaster(LockStep):
         self._stall_since: float | None = None
         self._stall_reported = False
         self._quiescent: asyncio.Event = asyncio.Event()
+        self._acknowledged: asyncio.Event = asyncio.Event()
 
     async def join(self) -> None:
         loop = asyncio.get_running_loop()
@@ -282,6 +284,7 @@ class TimeMaster(LockStep):
                                 "t": self.clock.monotonic()})
         else:
             self.present.discard(process)
+            self._acknowledged.set()
             if process in self.ready and process not in self.departed:
                 self.fail(f"process {process} went away at t={self.clock.monotonic():.3f} s; "
                           "virtual time cannot go on without it")
@@ -298,6 +301,9 @@ class TimeMaster(LockStep):
         elif op == "report":
             self._reports[sender] = message
             self._reports_in.set()
+        elif op == "ended":  # a follower acknowledges "end": it may now see us go
+            self.departed.add(sender)
+            self._acknowledged.set()
         elif op == "bye":
             self.departed.add(sender)
             log.info("lock-step: %s ended the run at t=%.3f s", sender,
@@ -308,11 +314,27 @@ class TimeMaster(LockStep):
 
     async def stop(self) -> None:
         self._ended = True
-        for follower in self.followers:
-            if follower in self.present and follower not in self.departed:
-                self.send(follower, {"op": "end"})
+        ending = [f for f in self.followers if f in self.present and f not in self.departed]
+        for follower in ending:
+            self.send(follower, {"op": "end"})
         if self._task is not None:
             self._task.cancel()
+        # Wait (a bounded wall-clock time) for each follower to acknowledge the end:
+        # closing the session first lets a follower see this process's liveliness go
+        # before the "end" message, and it would stop with "the time master went away".
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + _END_ACK_TIMEOUT
+        while any(f in self.present and f not in self.departed for f in ending):
+            self._acknowledged.clear()
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                log.warning("lock-step: %s did not acknowledge the end of the run",
+                            ", ".join(f for f in ending if f not in self.departed))
+                break
+            try:
+                await asyncio.wait_for(self._acknowledged.wait(), remaining)
+            except TimeoutError:
+                pass
 
     async def _coordinate(self) -> None:
         assert self._failure is not None
@@ -485,7 +507,8 @@ class TimeFollower(LockStep):
         await self._failure
 
     def on_process(self, process: str, present: bool) -> None:
-        if process == self.master and not present and self._welcomed.is_set():
+        if process == self.master and not present and self._welcomed.is_set() \
+                and not self._ended:
             self.fail(f"the time master {process} went away at "
                       f"t={self.clock.monotonic():.3f} s; virtual time cannot go on")
 
@@ -507,6 +530,8 @@ class TimeFollower(LockStep):
             self.clock.grant(float(message["t"]))
             self.grants += 1
         elif op == "end":
+            if not self._ended:
+                self.send(self.master, {"op": "ended", "from": self.bridge.process})
             self._ended = True
             log.info("lock-step: the time master ended the run at t=%.3f s",
                      self.clock.monotonic())
