@@ -199,8 +199,9 @@ class ArcDecisionIDL(_Struct):
                              description="the chosen arc's curvature, left positive")
     steeringAngle: float = field(0.0, unit="rad", allow_inf_nan=False,
                                  description="the steering angle commanded, left positive")
-    speed: float = field(0.0, unit="m/s", ge=0.0, allow_inf_nan=False,
-                         description="the speed commanded (0: stop)")
+    speed: float = field(0.0, unit="m/s", allow_inf_nan=False,
+                         description="the speed commanded (0: stop; negative: backing "
+                                     "out of a dead end)")
     fresh: tuple[str, ...] = field((), unit="", description="behaviours whose votes counted")
     stale: tuple[str, ...] = field((), unit="", description="behaviours whose latest vote "
                                                             "went stale")

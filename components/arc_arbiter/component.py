@@ -15,6 +15,13 @@ stale, and an arbiter whose voters all fell silent commands a stop as its last v
 stale. If the arbiter itself falls silent, Vehicle Control's command watchdog stops the
 vehicle.
 
+Back-out (afa addition, :mod:`components.arc_arbiter.recovery`): when every arc has been
+vetoed for ``RecoverAfter`` seconds (and only then: a stale or missing vote still means
+stop), the arbiter reverses ``RecoverDistance`` at ``RecoverSpeed`` on the steering that
+turns the vehicle towards the behaviours' preferred arc, checked clear on the latest
+global Traversability map, then hands back to the votes. Any other fail-safe during a
+back-out stops it at once; a new map that blocks the rest of it stops it too.
+
 Commands go out when the decision changes and at least every ``COMMAND_REFRESH`` seconds
 (feeding Vehicle Control's watchdog). Deciding never waits for Vehicle Control: a sender
 task makes the ``setVelocity`` calls one at a time, always with the latest decision
@@ -31,13 +38,17 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
+import numpy as np
+
 from afa import Event, SubscribePublishServer
 from afa.clock import TIME_TOLERANCE
 from afa.errors import AfaError
 from components.arc_arbiter.arbitrate import ArbiterDecision, VoteArbiter
 from components.arc_arbiter.parameters import ArcArbiterParameters
+from components.arc_arbiter.recovery import reverse_candidates, reverse_clearance
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcSetMismatchError, arc_set_of
 from idl import ArcDecisionIDL, ArcVoteIDL, TimeIDL, VehicleControl, VelocityIDL
+from idl.maps import TravMapArrayEventIDL
 
 __all__ = ["ArcArbiter", "STALE_CHECK_PERIOD", "COMMAND_REFRESH"]
 
@@ -56,6 +67,11 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         p = self.parameters
         self.subscribes(p.VoteEventName, ArcVoteIDL, self._on_vote, maxsize=64)
         self.decisions = self.publishes(p.DecisionEventName, ArcDecisionIDL)
+        if p.RecoverAfter > 0:
+            self.subscribes(p.TraverseEventName, TravMapArrayEventIDL, self._on_map, maxsize=2)
+        self._map: TravMapArrayEventIDL | None = None
+        self._vetoed_since: float | None = None  # every arc vetoed since then
+        self._backing: tuple[int, float, float] | None = None  # arc, started, until
         self.control = self.uses(VehicleControl, p.VehicleControlName)
         self.arcs = ArcSet.from_parameters()
         self.book = VoteArbiter(p, self.arcs, required=p.RequiredBehaviours)
@@ -68,7 +84,8 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._wake = asyncio.Event()
         self._busy = False  # the sender's call is waiting for Vehicle Control
         self.counters = {"votes": 0, "decisions": 0, "commands": 0, "command_errors": 0,
-                         "failsafe_stops": 0, "rejected_votes": 0}
+                         "failsafe_stops": 0, "rejected_votes": 0, "backouts": 0,
+                         "backouts_blocked": 0}
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
@@ -77,6 +94,8 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._sent = self._published = self._queued = None
         self._wake = asyncio.Event()
         self._busy = False
+        self._map = None
+        self._vetoed_since = self._backing = None
 
     async def run(self) -> None:
         self.spawn(self._sender(), f"{self.name}:sender")
@@ -100,14 +119,75 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self.counters["votes"] += 1
         self._decide()
 
+    def _on_map(self, event: Event) -> None:
+        self._map = event.body  # type: ignore[assignment]
+        if self._backing is not None and not self._reverse_clear(
+                self._backing[0], (self._backing[2] - self.clock.monotonic())
+                * self.parameters.RecoverSpeed):
+            self._backing = None  # the rest of the back-out is blocked: stand
+            self.counters["backouts_blocked"] += 1
+            self._decide()
+
+    def _reverse_clear(self, index: int, distance: float) -> bool:
+        p = self.parameters
+        if self._map is None:
+            return False
+        if distance <= 0:
+            return True
+        try:
+            return reverse_clearance(self._map, float(self.arcs.curvatures[index]), distance,
+                                     radius=p.VehicleRadius, offsets=p.DiscOffsets,
+                                     map_offset=p.MapFrameOffset)
+        except (ValueError, TypeError):  # a map without the layers it should hold
+            return False
+
+    def _back_out(self, decision: ArbiterDecision, now: float) -> ArbiterDecision:
+        """The decision, or a reverse when every arc has been vetoed too long
+        (module docstring)."""
+        p = self.parameters
+        if p.RecoverAfter <= 0:
+            return decision
+        if decision.failsafe != "all-vetoed":
+            if decision.failsafe is not None:
+                self._backing = None  # stale or missing votes: stop, whatever else
+            self._vetoed_since = None
+            if self._backing is None:
+                return decision
+        elif self._vetoed_since is None:
+            self._vetoed_since = now
+        if self._backing is not None and now >= self._backing[2] - TIME_TOLERANCE:
+            self._backing = None
+            self._vetoed_since = None if decision.failsafe is None else now
+        if self._backing is None and self._vetoed_since is not None \
+                and now - self._vetoed_since >= p.RecoverAfter - TIME_TOLERANCE:
+            self._vetoed_since = now  # the next try, if this one finds no way
+            preferred = float(self.arcs.curvatures[int(np.argmax(decision.scores))])
+            for index in reverse_candidates(self.arcs.curvatures, preferred):
+                if self._reverse_clear(index, p.RecoverDistance):
+                    self._backing = (index, now, now + p.RecoverDistance / p.RecoverSpeed)
+                    self.counters["backouts"] += 1
+                    self.log.info("every arc vetoed for %.1f s: backing out %.1f m on "
+                                  "curvature %.3f", p.RecoverAfter, p.RecoverDistance,
+                                  float(self.arcs.curvatures[index]))
+                    break
+            else:
+                self.counters["backouts_blocked"] += 1
+        if self._backing is None:
+            return decision
+        index = self._backing[0]
+        return ArbiterDecision(now, index, float(self.arcs.curvatures[index]),
+                               self.arcs.steering_angle(index), -p.RecoverSpeed,
+                               decision.scores, decision.vetoed, decision.fresh,
+                               decision.stale, decision.unknown, None)
+
     def _decide(self) -> None:
         now = self.clock.monotonic()
-        decision = self.book.decide(now)
+        decision = self._back_out(self.book.decide(now), now)
         self.decision = decision
         self.counters["decisions"] += 1
         key = (decision.index, decision.speed, decision.steering)
         if key != self._sent or now - self._sent_at >= COMMAND_REFRESH - TIME_TOLERANCE:
-            if decision.failsafe is not None and (self._sent is None or self._sent[1] > 0):
+            if decision.failsafe is not None and (self._sent is None or self._sent[1] != 0):
                 self.counters["failsafe_stops"] += 1
             self._sent, self._sent_at = key, now
             self._dispatch(decision)

@@ -57,6 +57,33 @@ class ArcArbiterParameters(Parameters):
                     "(e.g. PurePursuit: Obstacle Avoidance alone must not wander); empty as "
                     "in the seed")
 
+    RecoverAfter: Annotated[float, Field(ge=0)] = param(
+        3.0, unit="s",
+        description="afa addition: back out of a dead end after every arc has been vetoed "
+                    "this long (components/arc_arbiter/recovery.py); 0: never, stand still "
+                    "as the seed's arbiter does")
+    RecoverDistance: Annotated[float, Field(gt=0, le=10)] = param(
+        2.5, unit="m", description="afa addition: how far one back-out reverses")
+    RecoverSpeed: Annotated[float, Field(gt=0, le=1)] = param(
+        0.3, unit="m/s", description="afa addition: the reversing speed of a back-out")
+    TraverseEventName: str = param(
+        "Traverse", unit="-",
+        description="afa addition: the global Traversability map (TravMapArrayEventIDL) "
+                    "a back-out is checked on (no sensor looks behind the vehicle)")
+    VehicleRadius: Annotated[float, Field(gt=0)] = param(
+        0.7, unit="m",
+        description="afa addition: radius of the discs swept backwards in a back-out "
+                    "(Obstacle Avoidance's VehicleRadius)")
+    DiscOffsets: tuple[float, ...] = param(
+        (0.0, 0.8, 1.6, 2.4), unit="m",
+        description="afa addition: where along the body (m ahead of the rear axle) the "
+                    "back-out's discs ride (Obstacle Avoidance's DiscOffsets)")
+    MapFrameOffset: float = param(
+        2.45, unit="m",
+        description="afa addition: how far ahead of the rear axle the Traversability "
+                    "map's vehiclePosition lies (its ego frame, Raptor:Front-BumperCenter; "
+                    "docs/geometry.md)")
+
     @property
     def stale_vote_time(self) -> float:
         """The stale-vote age in seconds (StaleVoteTimeSec + StaleVoteTimeUSec / 1e6)."""
