@@ -22,7 +22,7 @@ Section ``fallback``: changes near the goal (3x3 and 7x7 squares on the path, bl
 freed, 2-50 % of the way from the goal), each timed from the same exact state as an
 uncapped incremental repair, as a from-scratch ``rebuild`` and as ``replan()`` (repair
 within the budget, else rebuild); prints the break-even expansion count behind the
-budget (docs/decisions/0015-dstar-fallback.md).
+budget (docs/decisions/0016-dstar-fallback.md).
 
 Usage: ``python benchmarks/planning.py [--sections dstar fallback] [--trials N] [--seed S]
 [--cpu]``

@@ -43,7 +43,7 @@ hold an out-of-date ``g`` even where ``g == rhs``; :meth:`DStarLite.cost_to_goal
 settles a cell on demand. :meth:`DStarLite.rebuild` replaces the whole state with the
 exact solution of the entire grid (scipy's Dijkstra on the reversed graph, vectorised);
 :meth:`DStarLite.replan` uses it when incremental repair would cost more (the rule and
-its measurements are in ``docs/decisions/0015-dstar-fallback.md``).
+its measurements are in ``docs/decisions/0016-dstar-fallback.md``).
 
 Typical use (one planning cycle of the component)::
 
@@ -99,7 +99,7 @@ _INF = math.inf
 _H_SCALE = 1.0 - 1e-10  # keeps the float heuristic below every float path cost
 _NOT_QUEUED = -1.0  # key sentinel: real keys are >= 0
 
-# The fallback rule (docs/decisions/0015-dstar-fallback.md): replan() lets an incremental
+# The fallback rule (docs/decisions/0016-dstar-fallback.md): replan() lets an incremental
 # repair run for max(FALLBACK_MIN_EXPANSIONS, FALLBACK_EXPANSIONS_PER_CELL * cells)
 # expansions, then rebuilds from scratch. Measured on a 2-core machine: a rebuild costs
 # ~0.3 us per cell plus ~0.25 ms, an expansion 3-4 us (cost decreases) to 6-12 us (cost

@@ -46,7 +46,7 @@ touch, each with the arc length at which it is *first* touched (its *reach*), or
 reach. Scoring a map is then a gather of the map's layers through these tables and a few
 reductions (:class:`ArcSweepScorer`), microseconds for a 32 × 32 map.
 
-Scoring (interpretation of Table A.10, decisions in docs/decisions/0014-arc-voting.md)
+Scoring (interpretation of Table A.10, decisions in docs/decisions/0015-arc-voting.md)
 -------------------------------------------------------------------------------
 - **Obstacle**: a cell with hazard ≥ ``hazard_threshold`` (default 1.0, the IDL's
   "1 = untraversable": the traversability map judges traversability, not this
