@@ -13,10 +13,10 @@ Behind the vehicle no sensor looks, so the reverse sweep is checked on the lates
 Traversability map (north-up, world frame; it holds the ground the vehicle drove over,
 seen on the way in): discs of ``VehicleRadius`` at ``DiscOffsets`` along the body are
 swept backwards along each candidate arc, and an arc is clear when no hazard cell
-(hazard 1) comes within a disc's radius. A hazard cell the body already overlaps (the
-vehicle stands there and has not collided: a map cell is coarser than the body) blocks
-only if the sweep brings it closer still. Unknown cells count as free: the ground the
-vehicle reverses over is the ground it came over. Candidates are tried from the steering
+(hazard 1) or unknown cell comes within a disc's radius: the ground the vehicle backs
+over must be ground the map has seen (it came over it), never the unseen edge of the
+world. A cell the body already overlaps (the vehicle stands there and has not collided:
+a map cell is coarser than the body) blocks only if the sweep brings it closer still. Candidates are tried from the steering
 that turns most towards the preferred arc; when none is clear the vehicle keeps standing.
 """
 
@@ -53,7 +53,7 @@ def reverse_clearance(trav: Any, curvature: float, distance: float, *, radius: f
     whose ``vehiclePosition`` lies ``map_offset`` metres ahead of the rear axle."""
     hazard = np.asarray(trav.hazard, dtype=np.float64)
     with np.errstate(invalid="ignore"):
-        blocked = np.argwhere(hazard >= threshold)  # NaN (unknown) compares False
+        blocked = np.argwhere((hazard >= threshold) | np.isnan(hazard))  # unknown too
     if len(blocked) == 0:
         return True
     g = float(trav.gridsize)

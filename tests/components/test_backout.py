@@ -88,11 +88,14 @@ def test_a_hazard_the_body_already_overlaps_blocks_only_when_the_sweep_closes_in
     assert not clear(trav(beside), hard, 2.5)   # reversing left-wheeled: the tail swings right
 
 
-def test_unknown_cells_behind_count_as_free():
+def test_unknown_ground_behind_blocks_a_back_out():
+    # the world's unseen edge 3.5 m behind the rear axle: as good as a wall
     m = trav([])
     hazard = np.array(m.hazard)
-    hazard[:32, :] = np.nan  # everything behind the vehicle unknown
-    assert clear(m.model_copy(update={"hazard": hazard}), 0.0)
+    hazard[:25, :] = np.nan  # cells behind x = -3.5 m never seen
+    unseen = m.model_copy(update={"hazard": hazard})
+    assert clear(unseen, 0.0, 2.5)
+    assert not clear(unseen, 0.0, 2.9)
 
 
 def test_candidates_start_from_the_mirror_of_the_preferred_arc():
