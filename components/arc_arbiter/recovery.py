@@ -16,7 +16,8 @@ swept backwards along each candidate arc, and an arc is clear when no hazard cel
 (hazard 1) or unknown cell comes within a disc's radius: the ground the vehicle backs
 over must be ground the map has seen (it came over it), never the unseen edge of the
 world. A cell the body already overlaps (the vehicle stands there and has not collided:
-a map cell is coarser than the body) blocks only if the sweep brings it closer still. Candidates are tried from the steering
+a map cell is coarser than the body) blocks only if the sweep brings it closer still.
+Candidates are tried from the steering
 that turns most towards the preferred arc; when none is clear the vehicle keeps standing.
 """
 

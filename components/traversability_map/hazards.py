@@ -28,9 +28,9 @@ tests):
 3. **Slope hazard**: a least-squares plane ``z = a·x + b·y + c`` through the known
    cells of the 3×3 neighbourhood (at their centroids) less than a step above or below
    the cell (a step is the step rule's; a fit across it would tilt every plane around
-   an obstacle into a slope hazard, the ring the step rule no longer marks), which must hold at least three
-   cells not (nearly) on one line (the normal equations' determinant in cell units ≥
-   0.25); angle = atan(√(a² + b²)); hazard ``min(1, angle / limit)``, graded so that
+   an obstacle into a slope hazard, the ring the step rule no longer marks), which must
+   hold at least three cells not (nearly) on one line (the normal equations'
+   determinant in cell units ≥ 0.25); angle = atan(√(a² + b²)); hazard ``min(1, angle / limit)``, graded so that
    the planner's cost rises with slope. Cells without a fit get no slope hazard.
 4. **Far field** (distance from the cell centre to the vehicle position > ``Farfield``):
    the thresholds are *relaxed*: ``T·Farfieldscale`` and the slope limit
@@ -49,8 +49,13 @@ tests):
      ground a step below its banks on both sides even allowing the steepest legal
      slope (a ditch bottom wider than one cell, where the 8-neighbour step sees only
      bottom). On a plane no steeper than the limit ``H <= elevation``: it never fires
-     on legal slopes. (A cell between two banks a step higher within ``hole_reach``,
-     such as a narrow gap between two tall obstacles, is sunken too.)
+     on legal slopes. And the cell lies a step below the *surrounding ground*: the
+     median elevation of the known cells within ``2·r`` cells. A ditch's floor lies
+     below the ground around the ditch; the gap between two tall obstacles (a gate in a
+     wall, two rocks or trunks) lies at the ground's own level and is not sunken (without
+     this a 3 m gate in a wall was a sunken line across the gate). A ditch wider than
+     the window is mostly floor and keeps its marked lips (the step rule's higher side)
+     and holes.
    - *Hole* (unknown cell): along some axis, let ``b±`` be the nearest known cell on
      each side (both must exist), ``t`` the *trend*, the flatter of their fitted
      slopes (tan, at most the limit's), ``bank = elevation(b) - t·d_b`` on each side
@@ -532,7 +537,21 @@ def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
             drop = unknown & f1 & f2 & (np.fmax(bank1, bank2) - deepest >= threshold)
         hole |= drop
         np.maximum(hole_goodness, np.where(drop, best, 0.0), out=hole_goodness)
-    return sunken, hole, hole_goodness
+    return _below_surroundings(sunken, elev, threshold, 2 * reach), hole, hole_goodness
+
+
+def _below_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
+                        threshold: FloatArray, radius: int) -> NDArray[np.bool_]:
+    """The candidates lying a step (``threshold``) or more below the median elevation of
+    the known cells within ``radius`` cells (a square window): the level of the ground
+    around them (module doc, sunken cell)."""
+    result = np.zeros_like(candidates)
+    rows, cols = elev.shape
+    for i, j in np.argwhere(candidates):
+        window = elev[max(i - radius, 0):i + radius + 1, max(j - radius, 0):j + radius + 1]
+        level = np.nanmedian(window)  # the candidate itself is known: never all-NaN
+        result[i, j] = level - elev[i, j] >= threshold[i, j]
+    return result
 
 
 class TraversabilityMapper:

@@ -166,6 +166,15 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                 best = max(best, good[(ii, jj)])
         return best
 
+    def below_ground(i: int, j: int, t: float) -> bool:
+        """A step below the median of the known elevations within 2·reach cells."""
+        around = sorted(elev(ii, jj) for ii in range(i - 2 * reach, i + 2 * reach + 1)
+                        for jj in range(j - 2 * reach, j + 2 * reach + 1)
+                        if 0 <= ii < rows and 0 <= jj < cols and cell(ii, jj) is not None)
+        n = len(around)
+        median = around[n // 2] if n % 2 else (around[n // 2 - 1] + around[n // 2]) / 2
+        return median - elev(i, j) >= t
+
     stepped: set[tuple[int, int]] = set()  # known cells with step >= T
     for i in range(rows):
         for j in range(cols):
@@ -240,7 +249,7 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                 if step >= t:
                     flags |= FLAG_STEP
                 hazard = min(step / t, 1.0) if rules.step_percent else float(step >= t)
-                if sunken:
+                if sunken and below_ground(i, j, t):  # a ditch floor, not a gap
                     hazard = 1.0
                     flags |= FLAG_SUNKEN
             if (i, j) in slopes:
@@ -525,3 +534,13 @@ def test_last_seen_tracker_follows_scrolls_and_changes() -> None:
     seen2 = tracker.update(moved, count2, 2.0)
     assert seen2[0, 1] == 1.0 and seen2[1, 2] == 2.0 and seen2[3, 3] == 2.0
     assert np.isnan(seen2[2, 2])
+
+
+def test_a_gate_in_a_wall_is_open_ground_not_a_sunken_cell() -> None:
+    """A 1.5 m wall along x = 4.0-4.4 with a 3 m gate (|y| < 1.5): the gate lies at the
+    ground's own level between two tall banks, and must stay free to drive through."""
+    layers = check_against_reference(terrain_from(
+        lambda x, y: np.where((x > 4.0) & (x < 4.4) & (np.abs(y) >= 1.5), 1.5, 0.0)))
+    gate = (rows_at(3.5, 5.0), slice(*[round((v - COARSE.origin_y) / 0.5) for v in (-1.0, 1.0)]))
+    assert not flagged(layers, FLAG_SUNKEN).any()
+    assert np.all(layers.hazard[gate] < 1.0)
