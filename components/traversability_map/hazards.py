@@ -31,7 +31,8 @@ tests):
    an obstacle into a slope hazard, the ring the step rule no longer marks), which must
    hold at least three cells not (nearly) on one line (the normal equations'
    determinant in cell units ≥ 0.25); angle = atan(√(a² + b²)); hazard
-   ``min(1, angle / limit)``, graded so that the planner's cost rises with slope. Cells without a fit get no slope hazard.
+   ``min(1, angle / limit)``, graded so that the planner's cost rises with slope.
+   Cells without a fit get no slope hazard.
 4. **Far field** (distance from the cell centre to the vehicle position > ``Farfield``):
    the thresholds are *relaxed*: ``T·Farfieldscale`` and the slope limit
    ``Maxslope·Farfieldslopescale`` (capped at 89.9°). Far data is less accurate
