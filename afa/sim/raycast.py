@@ -31,6 +31,9 @@ from __future__ import annotations
 
 import functools
 import math
+import os
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -40,6 +43,22 @@ from afa.sim.terrain import BLOCK_PAD, Terrain
 __all__ = ["cast_rays", "laser_scan", "laser_directions", "camera_directions", "depth_image"]
 
 FloatArray = NDArray[np.float64]
+
+
+def _load_kernel() -> Callable[..., None] | None:
+    """The compiled caster (decision 0014), or None for the numpy passes: when numba is
+    not installed, or ``AFA_RAYCAST=numpy`` asks for them."""
+    if os.environ.get("AFA_RAYCAST", "").lower() == "numpy":
+        return None
+    try:
+        from afa.sim._raycast_jit import cast_kernel
+    except ImportError:
+        return None
+    return cast_kernel  # type: ignore[no-any-return]
+
+
+#: The compiled caster in use, None when the numpy passes cast (see :func:`_load_kernel`).
+KERNEL: Any = _load_kernel()
 
 
 def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_range: float,
@@ -69,7 +88,8 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     if not length.min() > 0:  # also False for NaN
         raise ValueError("directions must be non-zero")
-    dx, dy, dz = (d / length[:, None]).T
+    unit = d / length[:, None]
+    dx, dy, dz = unit.T
     # a shared origin as scalars, per-ray origins as (N,) vectors (broadcast either way)
     ox, oy, oz = o.tolist() if shared else o.T
 
@@ -88,6 +108,12 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     blocks = terrain.block_max(block)
     by, bx = blocks.shape
     bmax = blocks.ravel()
+    if KERNEL is not None:  # the same passes, compiled: one loop per ray
+        padded = terrain.padded_surface()
+        KERNEL(np.ascontiguousarray(o.reshape(-1, 3)), unit, bmax, bx, by, padded.ravel(),
+               padded.shape[1], float(terrain.east0), float(terrain.north0), float(res),
+               block, n_seg, float(max_range), bool(clamp), float(BLOCK_PAD), x_max, y_max, ranges)
+        return ranges
     starts, offsets = _steps(n_seg, seg, block, res)
     # z is linear along a segment: its lowest point is the start, or the end if falling
     # (lowered by a micrometre, against rounding differences with the fine pass)
