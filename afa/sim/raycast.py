@@ -89,6 +89,9 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     if not length.min() > 0:  # also False for NaN
         raise ValueError("directions must be non-zero")
     unit = d / length[:, None]
+    if KERNEL is not None:
+        _cast_compiled(terrain, o, shared, unit, max_range, block, ranges)
+        return ranges
     dx, dy, dz = unit.T
     # a shared origin as scalars, per-ray origins as (N,) vectors (broadcast either way)
     ox, oy, oz = o.tolist() if shared else o.T
@@ -108,12 +111,6 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     blocks = terrain.block_max(block)
     by, bx = blocks.shape
     bmax = blocks.ravel()
-    if KERNEL is not None:  # the same passes, compiled: one loop per ray
-        padded = terrain.padded_surface()
-        KERNEL(np.ascontiguousarray(o.reshape(-1, 3)), unit, bmax, bx, by, padded.ravel(),
-               padded.shape[1], float(terrain.east0), float(terrain.north0), float(res),
-               block, n_seg, float(max_range), bool(clamp), float(BLOCK_PAD), x_max, y_max, ranges)
-        return ranges
     starts, offsets = _steps(n_seg, seg, block, res)
     # z is linear along a segment: its lowest point is the start, or the end if falling
     # (lowered by a micrometre, against rounding differences with the fine pass)
@@ -191,6 +188,27 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
         ranges[hit_rays] = np.where(t_hit <= max_range, t_hit, np.nan)
         found[hit_rays] = True
     return ranges
+
+
+def _cast_compiled(terrain: Terrain, o: FloatArray, shared: bool, unit: FloatArray,
+                   max_range: float, block: int, ranges: FloatArray) -> None:
+    """The passes below, compiled (decision 0014): the same bounds, clamping and
+    arithmetic, one loop per ray."""
+    res = terrain.resolution
+    n_seg = int(math.ceil(max_range / (block * res)))
+    east0, north0 = float(terrain.east0), float(terrain.north0)
+    x_max, y_max = terrain.nx + 1.0 - 1e-9, terrain.ny + 1.0 - 1e-9
+    clamp = True
+    if shared:
+        ox, oy, _ = o.tolist()
+        gx = (ox - east0) / res + 1.0
+        gy = (oy - north0) / res + 1.0
+        reach = n_seg * block + 1.0
+        clamp = not (reach <= gx <= x_max - reach and reach <= gy <= y_max - reach)
+    bmax, bx, by, surface, width = terrain.ray_tables(block)
+    KERNEL(np.ascontiguousarray(o.reshape(-1, 3)), unit, bmax, bx, by, surface, width,
+           east0, north0, float(res), block, n_seg, float(max_range), clamp,
+           float(BLOCK_PAD), x_max, y_max, ranges)
 
 
 @functools.lru_cache(maxsize=8)
