@@ -47,8 +47,8 @@ FloatArray = NDArray[np.float64]
 
 def _load_kernel() -> Callable[..., None] | None:
     """The compiled caster (decision 0014), or None for the numpy passes: when numba is
-    not installed, or ``AFA_RAYCAST=numpy`` asks for them."""
-    if os.environ.get("AFA_RAYCAST", "").lower() == "numpy":
+    not installed, or ``AFA_KERNELS=numpy`` asks for them."""
+    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
         return None
     try:
         from afa.sim._raycast_jit import cast_kernel

@@ -173,7 +173,7 @@ def test_bad_arguments() -> None:
 # -- the compiled caster (decision 0014) against the numpy passes ------------------------------
 
 compiled = pytest.mark.skipif(raycast.KERNEL is None,
-                              reason="no compiled caster (numba missing, or AFA_RAYCAST=numpy)")
+                              reason="no compiled caster (numba missing, or AFA_KERNELS=numpy)")
 
 
 def _both(monkeypatch: pytest.MonkeyPatch, cast: Callable[..., np.ndarray], *args: object
