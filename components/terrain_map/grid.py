@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import bisect
 import enum
+import logging
 import math
 import os
 from collections import Counter, deque
@@ -216,7 +217,11 @@ def _load_fuse_kernel() -> Any:
         return None
     try:
         from components.terrain_map._jit import fuse_kernel
-    except ImportError:
+    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
+        if isinstance(exc, ModuleNotFoundError) and exc.name == "numba":
+            return None  # not installed: quietly
+        logging.getLogger(__name__).warning("compiled kernel unavailable (%s): numpy "
+                                            "fallback", exc)
         return None
     return fuse_kernel
 
