@@ -17,7 +17,10 @@ second is less disturbed by other work on the machine). Start-up (configuration,
 imports) is not counted. ``--components`` adds one sampled run of the autonomous stack
 that splits its CPU time between the components, the emulators, the simulation and the
 framework (ms of CPU per simulated second). ``--rays`` adds the cost of the ray casting
-behind one laser scan line and one stereo frame.
+behind one laser scan line and one stereo frame. Every run also times a fixed
+*yardstick* workload (interpreted Python, small numpy operations, hashing) in its own
+interpreter right after the simulation, and the medians are printed beside the factors:
+the machine's speed at the time, so that figures from different days compare.
 
 The targets (issues): sensing >= 20x, autonomous >= 10x real time on a 2-core
 machine. This script prints figures; it never asserts them.
@@ -106,7 +109,40 @@ def one(stack: str, world: Path, seed: int, duration: float, components: bool) -
     """A single run, its figures as one JSON line on stdout."""
     logging.disable(logging.WARNING)  # start-up notes and the run's own warnings
     sampler = Sampler() if components else None
-    print(json.dumps(asyncio.run(_run(stack, world, seed, duration, sampler))))
+    result = asyncio.run(_run(stack, world, seed, duration, sampler))
+    result["yardstick_ms"] = yardstick()
+    print(json.dumps(result))
+
+
+# -- the yardstick: a fixed workload timed in every run ----------------------------------------
+
+
+def yardstick(repeat: int = 5) -> float:
+    """CPU ms of a fixed workload shaped like the simulator's (interpreted Python, small
+    numpy operations, hashing; no ray casting, no I/O), the median of ``repeat``, timed
+    in the same interpreter right after the run: how fast this machine was then. A run's
+    real-time factor times its yardstick is steadier across days and machine load than
+    either alone (figures from different days compare through it)."""
+    import hashlib
+
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    small = rng.normal(size=(361, 3))
+    blob = rng.bytes(1 << 16)
+    samples = []
+    for _ in range(repeat):
+        t0 = time.process_time()
+        total = 0
+        for i in range(240_000):  # interpreted arithmetic
+            total += (i * 7) % 13
+        for _ in range(1_600):  # small array operations
+            lengths = np.sqrt(np.einsum("ij,ij->i", small, small))
+            total += int(np.count_nonzero(lengths > 1.0))
+        for _ in range(160):
+            hashlib.sha256(blob).digest()
+        samples.append(time.process_time() - t0)
+    return round(statistics.median(samples) * 1e3, 2)
 
 
 # -- where the CPU time goes ------------------------------------------------------------------
@@ -229,7 +265,7 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
             "cpu_realtime_factor": med("cpu_realtime_factor"),
             "cpu_realtime_factor_range": [min(r["cpu_realtime_factor"] for r in runs),
                                           max(r["cpu_realtime_factor"] for r in runs)],
-            "wall_s": med("wall_s"), "cpu_s": med("cpu_s"),
+            "wall_s": med("wall_s"), "cpu_s": med("cpu_s"), "yardstick_ms": med("yardstick_ms"),
             "event_digests": sorted({r["event_digest"] for r in runs})}
 
 
@@ -280,7 +316,7 @@ def main() -> None:
         print(f"  {stack:10s} ({r['components']:2d} components, {r['events']} events): "
               f"{r['realtime_factor']:6.2f}x real time by wall clock ({lo}-{hi}), "
               f"{r['cpu_realtime_factor']:6.2f}x by CPU time ({clo}-{chi}); "
-              f"target {TARGETS[stack]:g}x")
+              f"target {TARGETS[stack]:g}x; yardstick {r['yardstick_ms']:g} ms")
         if len(r["event_digests"]) != 1:
             print(f"    the runs' event digests differ: {r['event_digests']}")
     if args.components:

@@ -30,7 +30,11 @@ docs/geometry.md.
 from __future__ import annotations
 
 import functools
+import logging
 import math
+import os
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -40,6 +44,27 @@ from afa.sim.terrain import BLOCK_PAD, Terrain
 __all__ = ["cast_rays", "laser_scan", "laser_directions", "camera_directions", "depth_image"]
 
 FloatArray = NDArray[np.float64]
+
+
+def _load_kernel() -> Callable[..., None] | None:
+    """The compiled caster (decision 0014), or None for the numpy passes: when numba is
+    not installed or cannot compile or cache the kernel here, or ``AFA_KERNELS=numpy``
+    asks for them."""
+    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
+        return None
+    try:
+        from afa.sim._raycast_jit import cast_kernel
+    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
+        if isinstance(exc, ModuleNotFoundError) and exc.name == "numba":
+            return None  # not installed: quietly
+        logging.getLogger(__name__).warning("compiled kernel unavailable (%s): numpy "
+                                            "fallback", exc)
+        return None
+    return cast_kernel  # type: ignore[no-any-return]
+
+
+#: The compiled caster in use, None when the numpy passes cast (see :func:`_load_kernel`).
+KERNEL: Any = _load_kernel()
 
 
 def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_range: float,
@@ -69,7 +94,11 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     if not length.min() > 0:  # also False for NaN
         raise ValueError("directions must be non-zero")
-    dx, dy, dz = (d / length[:, None]).T
+    unit = d / length[:, None]
+    if KERNEL is not None:
+        _cast_compiled(terrain, o, shared, unit, max_range, block, ranges)
+        return ranges
+    dx, dy, dz = unit.T
     # a shared origin as scalars, per-ray origins as (N,) vectors (broadcast either way)
     ox, oy, oz = o.tolist() if shared else o.T
 
@@ -165,6 +194,27 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
         ranges[hit_rays] = np.where(t_hit <= max_range, t_hit, np.nan)
         found[hit_rays] = True
     return ranges
+
+
+def _cast_compiled(terrain: Terrain, o: FloatArray, shared: bool, unit: FloatArray,
+                   max_range: float, block: int, ranges: FloatArray) -> None:
+    """The passes below, compiled (decision 0014): the same bounds, clamping and
+    arithmetic, one loop per ray."""
+    res = terrain.resolution
+    n_seg = int(math.ceil(max_range / (block * res)))
+    east0, north0 = float(terrain.east0), float(terrain.north0)
+    x_max, y_max = terrain.nx + 1.0 - 1e-9, terrain.ny + 1.0 - 1e-9
+    clamp = True
+    if shared:
+        ox, oy, _ = o.tolist()
+        gx = (ox - east0) / res + 1.0
+        gy = (oy - north0) / res + 1.0
+        reach = n_seg * block + 1.0
+        clamp = not (reach <= gx <= x_max - reach and reach <= gy <= y_max - reach)
+    bmax, bx, by, surface, width = terrain.ray_tables(block)
+    KERNEL(np.ascontiguousarray(o.reshape(-1, 3)), unit, bmax, bx, by, surface, width,
+           east0, north0, float(res), block, n_seg, float(max_range), clamp,
+           float(BLOCK_PAD), x_max, y_max, ranges)
 
 
 @functools.lru_cache(maxsize=8)

@@ -73,6 +73,8 @@ class Terrain:
         for array in (self.ground, self.surface, self.ids):
             array.flags.writeable = False
         self._block_cache: dict[int, NDArray[np.float32]] = {}
+        self._ray_tables: dict[int, tuple[NDArray[np.float32], int, int,
+                                          NDArray[np.float32], int]] = {}
         self._padded: NDArray[np.float32] | None = None
         self._circles: NDArray[np.float64] | None = None  # east, north, bounding radius
 
@@ -232,6 +234,18 @@ class Terrain:
             padded.flags.writeable = False
             self._padded = padded
         return self._padded
+
+    def ray_tables(self, block: int) -> tuple[NDArray[np.float32], int, int,
+                                              NDArray[np.float32], int]:
+        """What the compiled ray caster reads, cached per block size: the flat
+        :meth:`block_max` array, its row length and row count, the flat
+        :meth:`padded_surface` and its row length."""
+        cached = self._ray_tables.get(block)
+        if cached is None:
+            blocks, padded = self.block_max(block), self.padded_surface()
+            cached = self._ray_tables[block] = (blocks.ravel(), blocks.shape[1], blocks.shape[0],
+                                                padded.ravel(), padded.shape[1])
+        return cached
 
     def block_max(self, block: int) -> NDArray[np.float32]:
         """Conservative maxima for ray casting, cached per block size.

@@ -43,7 +43,9 @@ from __future__ import annotations
 
 import bisect
 import enum
+import logging
 import math
+import os
 from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -207,6 +209,26 @@ class FuseStats:
 #: page faults; chunks also stay in cache).
 CHUNK = 32768
 
+
+def _load_fuse_kernel() -> Any:
+    """The compiled :meth:`TerrainGrid._fuse_chunk` (decision 0014), or None for the numpy
+    form: when numba is not installed, or ``AFA_KERNELS=numpy`` asks for it."""
+    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
+        return None
+    try:
+        from components.terrain_map._jit import fuse_kernel
+    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
+        if isinstance(exc, ModuleNotFoundError) and exc.name == "numba":
+            return None  # not installed: quietly
+        logging.getLogger(__name__).warning("compiled kernel unavailable (%s): numpy "
+                                            "fallback", exc)
+        return None
+    return fuse_kernel
+
+
+#: The compiled fusion in use, None when the numpy form fuses.
+FUSE_KERNEL: Any = _load_fuse_kernel()
+
 #: Batches up to this many points are transformed with one matrix product; larger
 #: ones column by column (BLAS is slow for an (n, 3) x (3, 3) product, and its threads
 #: contend with everything else on a small machine).
@@ -351,6 +373,15 @@ class TerrainGrid:
         (fused, nonfinite)."""
         n = p.shape[0]
         geo = self._geometry
+        if FUSE_KERNEL is not None:  # the same, compiled: one loop over the points
+            assign = time >= self._newest
+            fused, nonfinite = FUSE_KERNEL(
+                np.ascontiguousarray(p), float(geo.origin_x), float(geo.origin_y),
+                float(geo.gridsize), int(geo.rows), int(geo.cols), float(time), assign,
+                self.count, self.sum_z, self.sum_z2, self.min_z, self.max_z, self.last_seen)
+            if fused and assign:
+                self._newest = time
+            return int(fused), int(nonfinite)
         fi, fj, low, z = (self._fi[:n], self._fj[:n], self._low[:n], self._z[:n])
         inside, test = self._inside[:n], self._test[:n]
         np.copyto(z, p[:, 2])  # contiguous: ufunc.at is ~2x faster than on a strided column

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+import components.terrain_map.grid as grid_module
 from components.terrain_map.grid import (
     CHUNK,
     SMALL_BATCH,
@@ -484,3 +485,40 @@ def test_stereo_balance() -> None:
     kept = balance.select(t, frame)
     assert len(kept) == 12800 and np.shares_memory(kept, frame)
     assert balance.budget(t + 5.0) is None  # the lasers went quiet
+
+
+# -- the compiled fusion (decision 0014) against the numpy form ---------------------------------
+
+
+@pytest.mark.skipif(grid_module.FUSE_KERNEL is None,
+                    reason="no compiled fusion (numba missing, or AFA_KERNELS=numpy)")
+def test_compiled_fusion_is_bit_for_bit_the_numpy_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(11)
+    grids = [TerrainGrid.centred(3.0, -2.0, 20.0, 30.0, 0.25) for _ in range(2)]
+    kernel = grid_module.FUSE_KERNEL
+    for step in range(40):
+        n = int(rng.integers(0, 3000))
+        points = rng.normal(scale=6.0, size=(n, 3))
+        points[:, 2] = np.where(rng.random(n) < 0.3, 0.0, points[:, 2])
+        points[:, 2] *= rng.choice([1.0, -1.0], n)  # ties between 0.0 and -0.0
+        if n:
+            spoil = rng.integers(0, n, size=max(1, n // 50))
+            points[spoil, rng.integers(0, 3, size=spoil.size)] = rng.choice(
+                [np.nan, np.inf, -np.inf], size=spoil.size)
+            points[spoil[::2], 0] = 1e30  # finite, far outside
+        time = float(step) if step % 7 else step - 3.5  # now and then a late batch
+        transform = np.eye(4)
+        transform[:3, 3] = rng.normal(size=3)
+        stats = []
+        for grid, compiled in zip(grids, (True, False), strict=True):
+            monkeypatch.setattr(grid_module, "FUSE_KERNEL", kernel if compiled else None)
+            if step % 2:
+                stats.append(grid.fuse(points.astype(np.float32), time))
+            else:
+                stats.append(grid.fuse_transformed(points, transform, time))
+            if step == 20:
+                grid.recentre(6.0, 1.0)
+        assert stats[0] == stats[1]
+    for a, b in zip(grids[0]._accumulators(), grids[1]._accumulators(), strict=True):
+        assert a.tobytes() == b.tobytes()
+    assert grids[0].fused_total > 10_000 and grids[0].nonfinite_total > 100

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from afa.sim import Obstacle, Terrain, TerrainSpec, cast_rays, depth_image, laser_scan
+from afa.sim import Obstacle, Terrain, TerrainSpec, cast_rays, depth_image, laser_scan, raycast
+from afa.sim.world import load_world
+
+WORLDS = Path(__file__).resolve().parents[2] / "configs" / "worlds"
 
 FLAT = TerrainSpec(width=80, depth=80, resolution=0.1)
 
@@ -163,3 +168,55 @@ def test_bad_arguments() -> None:
     with pytest.raises(ValueError):
         laser_scan(terrain, [0, 0, 1], np.eye(2), [0.0], 10.0)
     assert cast_rays(terrain, [0, 0, 1], np.zeros((0, 3)), 10.0).shape == (0,)
+
+
+# -- the compiled caster (decision 0014) against the numpy passes ------------------------------
+
+compiled = pytest.mark.skipif(raycast.KERNEL is None,
+                              reason="no compiled caster (numba missing, or AFA_KERNELS=numpy)")
+
+
+def _both(monkeypatch: pytest.MonkeyPatch, cast: Callable[..., np.ndarray], *args: object
+          ) -> tuple[np.ndarray, np.ndarray]:
+    fast = cast(*args)
+    monkeypatch.setattr(raycast, "KERNEL", None)
+    slow = cast(*args)
+    monkeypatch.undo()
+    return fast, slow
+
+
+@compiled
+@pytest.mark.parametrize("world", ["rock-field", "forest", "long-wall", "slalom"])
+def test_compiled_caster_is_bit_for_bit_the_numpy_one(world: str,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = load_world(WORLDS / f"{world}.xml")
+    terrain = Terrain.from_spec(spec.terrain, spec.obstacles)
+    rng = np.random.default_rng(7)
+    half_w, half_d = terrain.spec.width / 2, terrain.spec.depth / 2
+    hits = 0
+    for trial in range(60):
+        origin = np.array([rng.uniform(-half_w - 3, half_w + 3),
+                           rng.uniform(-half_d - 3, half_d + 3), rng.uniform(-0.3, 2.5)])
+        directions = _random_directions(rng, 361)
+        if trial % 3 == 0:  # one origin per ray
+            origin = origin + rng.normal(scale=0.5, size=(361, 3))
+        max_range = (8.183, 25.0, 2.0)[trial % 3]
+        fast, slow = _both(monkeypatch, cast_rays, terrain, origin, directions, max_range)
+        np.testing.assert_array_equal(fast, slow)
+        hits += int(np.isfinite(fast).sum())
+    camera = pitch_down(15)[:, [1, 2, 0]] * [-1, -1, 1]
+    fast, slow = _both(monkeypatch, depth_image, terrain, [0, 0, 1.5], camera, 80, 60)
+    np.testing.assert_array_equal(fast, slow)
+    assert hits > 500
+
+
+@compiled
+def test_compiled_caster_agrees_with_brute_force(monkeypatch: pytest.MonkeyPatch) -> None:
+    terrain = _rough_world()
+    directions = _random_directions(np.random.default_rng(5), 80)
+    origin = (18.5, 17.0, 1.2)
+    fast, slow = _both(monkeypatch, cast_rays, terrain, origin, directions, 8.183)
+    expected = _brute_force(terrain, np.tile(origin, (80, 1)), directions, 8.183)
+    np.testing.assert_array_equal(fast, slow)
+    np.testing.assert_array_equal(np.isnan(fast), np.isnan(expected))
+    np.testing.assert_allclose(fast, expected, atol=0.01)
