@@ -16,12 +16,13 @@ tests):
 2. **Step hazard** of a known cell: ``step = max(max - min, max over known 8-neighbours
    (elevation - elevation_n), 0)``. The within-cell spread catches a wall inside the
    cell; neighbour differences use mean elevations (not max - min across cells,
-   which would read a traversable 19° ramp as a 0.3 m step over a diagonal). Only the
-   *higher* side of a step between cells is marked: a rock's or a trunk's own cells,
-   a ledge's or a ditch's lip, never the open ground in front of them (marking both
-   sides grew a 0.6 m trunk into a 2 m obstacle, which closed the gaps of a forest;
-   Obstacle Avoidance adds the vehicle's own radius). A ditch's floor is marked by the
-   sunken-cell rule below. With
+   which would read a traversable 19° ramp as a 0.3 m step over a diagonal). The
+   *higher* side of a step between cells is marked (a rock's or a trunk's own cells, a
+   ledge's or a ditch's lip); the *lower* side only when it lies a step below the
+   surrounding ground (the median elevation of the known cells within ``2·r`` cells,
+   ``r`` as in 5): the foot of a ditch's wall, never the open ground in front of a rock
+   (marking both sides grew a 0.6 m trunk into a 2 m obstacle, which closed the gaps of
+   a forest; Obstacle Avoidance adds the vehicle's own radius). With
    ``StepPercent`` 0 the hazard is binary, 1 when ``step >= T``; with ``StepPercent``
    1 it is graded, ``min(1, step / T)``: the step "as a percentage" of ``Stepheight``
    (which stays in millimetres).
@@ -390,8 +391,13 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     around = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURS, (rows, cols))
     differences = elev - around
     differences[np.isnan(differences)] = 0.0  # unknown neighbours add nothing
-    step = np.where(known, np.maximum(high - low, np.maximum(differences.max(axis=0), 0.0)),
-                    np.nan)
+    upper = np.maximum(differences.max(axis=0), 0.0)  # a step above a neighbour
+    lower = np.maximum(-differences.min(axis=0), 0.0)  # a step below a neighbour
+    with np.errstate(invalid="ignore"):
+        in_pit = _below_surroundings(known & (lower >= threshold), elev, threshold,
+                                     2 * math.ceil(rules.hole_reach / g - 1e-9))
+    step = np.where(known, np.maximum(high - low, np.where(in_pit, np.maximum(upper, lower),
+                                                           upper)), np.nan)
     with np.errstate(invalid="ignore"):
         step_full = known & (step >= threshold)
     if rules.step_percent:
@@ -543,15 +549,19 @@ def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
 
 def _below_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
                         threshold: FloatArray, radius: int) -> NDArray[np.bool_]:
-    """The candidates lying a step (``threshold``) or more below the median elevation of
-    the known cells within ``radius`` cells (a square window): the level of the ground
-    around them (module doc, sunken cell)."""
+    """The candidates (known cells) lying a step (``threshold``) or more below the
+    median elevation of the known cells within ``radius`` cells (a square window
+    clipped at the grid's edge): below the level of the ground around them, in a pit or
+    a ditch (module doc)."""
     result = np.zeros_like(candidates)
-    rows, cols = elev.shape
-    for i, j in np.argwhere(candidates):
-        window = elev[max(i - radius, 0):i + radius + 1, max(j - radius, 0):j + radius + 1]
-        level = np.nanmedian(window)  # the candidate itself is known: never all-NaN
-        result[i, j] = level - elev[i, j] >= threshold[i, j]
+    where = np.argwhere(candidates)
+    if len(where) == 0:
+        return result
+    windows = np.lib.stride_tricks.sliding_window_view(
+        _padded(elev, radius, np.nan), (2 * radius + 1, 2 * radius + 1))
+    i, j = where[:, 0], where[:, 1]
+    level = np.nanmedian(windows[i, j].reshape(len(where), -1), axis=1)
+    result[i, j] = level - elev[i, j] >= threshold[i, j]
     return result
 
 

@@ -189,6 +189,9 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                     b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
                     if b is not None:
                         spread = max(spread, e - b[1] / b[0])  # the higher side
+                        if b[1] / b[0] - e >= params(i, j)[1] \
+                                and below_ground(i, j, params(i, j)[1]):  # in a pit
+                            spread = max(spread, b[1] / b[0] - e)
             if spread >= params(i, j)[1]:
                 stepped.add((i, j))
 
@@ -242,6 +245,8 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                     b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
                     if b is not None and (di or dj):
                         neighbour = max(neighbour, e - b[1] / b[0])  # higher side
+                        if b[1] / b[0] - e >= t and below_ground(i, j, t):  # in a pit
+                            neighbour = max(neighbour, b[1] / b[0] - e)
             step = max(a[5] - a[4], neighbour)
             out["step"][i, j] = step
             hazard = 0.0
