@@ -358,9 +358,14 @@ class System:
         instant), so that what happens at the end time is the same whether the system is
         one process or several.
 
-        Time runs for the call even on a paused virtual clock, which is paused again
-        when it returns (``await system.run(10)`` in a notebook cell: ten simulated
-        seconds, then time stands still until the next run)."""
+        With a ``duration`` or ``until``, time runs for the call even on a paused virtual
+        clock, which is paused again when it returns (``await system.run(10)`` in a
+        notebook cell: ten simulated seconds, then time stands still until the next
+        run). Without either, the clock is left to whoever owns it (a paused replay stays
+        paused until its player resumes it)."""
+        if duration is None and until is None:
+            await self._run(duration, until)
+            return
         with self.clock.running():
             await self._run(duration, until)
 

@@ -163,3 +163,20 @@ def test_realtime_factor_gives_afa_run_a_paced_virtual_clock():
     fast = run_clock(fast=True)
     assert isinstance(fast, VirtualClock) and fast.pace is None
     assert not isinstance(run_clock(), VirtualClock)
+
+
+async def test_running_until_stopped_leaves_a_paused_clock_to_its_owner():
+    """A replay started paused stays paused under ``system.run()`` (no duration): only
+    a bounded run spends time on its own."""
+    clock = VirtualClock(start=0.0, auto_advance=False)
+    ticker = Ticker("Ticker")
+    async with System([ticker], clock=clock) as system:
+        runner = asyncio.get_running_loop().create_task(system.run())
+        await idle_loop()
+        assert clock.monotonic() == 0.0 and clock.paused and not runner.done()
+        clock.resume()  # the player's resume
+        await clock.sleep(1.0)
+        clock.pause()
+        system.request_stop()
+        await runner
+        assert clock.monotonic() == pytest.approx(1.0) and ticker.n == 11
