@@ -361,18 +361,25 @@ def _simulator() -> Any:
     return found[sorted(found)[0]].load()
 
 
+def run_clock(fast: bool = False, realtime_factor: float | None = None) -> Any:
+    """The clock of ``afa run``: ``--fast``, virtual time as fast as possible;
+    ``--realtime-factor N``, virtual time paced at N times real time (in Python:
+    ``VirtualClock(pace=N)``); neither, the wall clock."""
+    from afa.clock import VirtualClock, WallClock
+
+    if fast:
+        return VirtualClock()
+    if realtime_factor is not None:
+        return VirtualClock(pace=realtime_factor)
+    return WallClock()
+
+
 async def _run_system(args: argparse.Namespace) -> int:
-    from afa.clock import Clock, VirtualClock, WallClock
+    from afa.clock import Clock
     from afa.errors import StartupError, TaskFailed
     from afa.system import System
 
-    clock: Clock
-    if args.fast:
-        clock = VirtualClock()
-    elif args.realtime_factor is not None:
-        clock = VirtualClock(pace=args.realtime_factor)
-    else:
-        clock = WallClock()
+    clock: Clock = run_clock(args.fast, args.realtime_factor)
     from afa.bridge.runner import lockstep_clock, system_options
     from afa.bridge.runner import summary as bridge_summary
 

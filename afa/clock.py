@@ -96,6 +96,13 @@ class Clock(ABC):
         Transports wrap their reads in it; on a real-time clock it does nothing."""
         yield
 
+    @contextmanager
+    def running(self) -> Iterator[None]:
+        """Let time pass inside the block even if the clock is paused (see
+        :meth:`VirtualClock.running`); real time always passes, so here it does nothing.
+        :meth:`System.start <afa.system.System.start>`, ``run`` and ``stop`` run in it."""
+        yield
+
     async def sleep_until(self, deadline: float) -> None:
         """Suspend until ``monotonic() >= deadline``."""
         if deadline <= self.monotonic():
@@ -251,15 +258,24 @@ class VirtualClock(Clock):
       multiple of real time (a time stamp never runs ahead of the paced line; a run
       that falls behind catches up without waiting).
     - ``auto_advance=False`` starts paused: time moves only through :meth:`advance`,
-      :meth:`run_for` or :meth:`resume`.
+      :meth:`run_for`, :meth:`resume`, or inside :meth:`running` (a System starts,
+      runs and stops in it, so a paused clock does not deadlock ``system.start()``).
+      A notebook keeps its clock paused so that time does not run on, at full CPU,
+      between cells.
+    - ``real_time``: the real-time source pacing reads (``time.monotonic``; a test
+      injects its own to check pacing without waiting).
     - While real I/O is pending (:meth:`real_io`), virtual time runs at most at real
       time, so waiting on the outside world is not mistaken for idleness.
     """
 
     def __init__(self, start: float = DEFAULT_EPOCH, *, auto_advance: bool = True,
-                 pace: float | None = None) -> None:
+                 pace: float | None = None,
+                 real_time: Callable[[], float] = time.monotonic) -> None:
         if pace is not None and not pace > 0:
             raise ValueError(f"pace must be positive or None, got {pace}")
+        self._real_time = real_time
+        self._holds = 0  # running() blocks in progress
+        self._held_paused = False  # the outermost running() found the clock paused
         self._start = float(start)
         self._t = 0.0
         self._wall_offset = 0.0
@@ -295,7 +311,7 @@ class VirtualClock(Clock):
         if value is not None and not value > 0:
             raise ValueError(f"pace must be positive or None, got {value}")
         self._pace = value
-        self._anchor = None
+        self._anchor_now()
         self._poke()
 
     @property
@@ -304,13 +320,37 @@ class VirtualClock(Clock):
 
     def pause(self) -> None:
         """Freeze time: timers stay pending until :meth:`resume`, :meth:`advance` or
-        :meth:`run_for`."""
+        :meth:`run_for` (a pause inside :meth:`running` holds the block too: an
+        operator's pause button stops a run in progress)."""
+        self._held_paused = False
         self.auto_advance = False
 
     def resume(self) -> None:
         """Let time advance by itself again (paced from this moment)."""
+        self._held_paused = False  # stays running after any running() block
+        self._resume()
+
+    @contextmanager
+    def running(self) -> Iterator[None]:
+        """Let time advance by itself (paced, if :attr:`pace` is set) inside the block,
+        and leave the clock as it was: a clock that was paused is paused again at the
+        end, so nothing runs on at full CPU once the block is left (between notebook
+        cells). Blocks nest and may overlap in several tasks; the last one out pauses."""
+        if self._holds == 0 and self.paused:
+            self._held_paused = True
+            self._resume()
+        self._holds += 1
+        try:
+            yield
+        finally:
+            self._holds -= 1
+            if self._holds == 0 and self._held_paused:
+                self._held_paused = False
+                self.auto_advance = False
+
+    def _resume(self) -> None:
         self.auto_advance = True
-        self._anchor = None
+        self._anchor_now()
         if self._driver is not None or self._timers:
             try:
                 self._ensure_driver()
@@ -328,8 +368,9 @@ class VirtualClock(Clock):
         earliest = self._timers[0][0] if self._timers else None
         heapq.heappush(self._timers, (handle.deadline, next(self._order), handle))
         if self.auto_advance:
-            if not self._served:
+            if not self._served:  # time starts moving (again): pace from now
                 self._ensure_driver()
+                self._anchor_now()
             if earliest is None or handle.deadline < earliest:
                 self._poke()
         return handle
@@ -368,10 +409,14 @@ class VirtualClock(Clock):
         await self.settle()
 
     async def run_for(self, seconds: float) -> None:
-        """Run for ``seconds`` of virtual time and leave the clock as it was (paused
-        clocks stay paused between calls: a notebook cell can run a simulation for ten
-        seconds and the next cell finds it where it stopped)."""
-        await self.advance(seconds)
+        """Run for ``seconds`` of virtual time, paced if :attr:`pace` is set, and leave
+        the clock as it was (paused clocks stay paused between calls: a notebook cell
+        can run a simulation for ten seconds and the next cell finds it where it
+        stopped). Returns settled at ``monotonic() + seconds``."""
+        target = self._t + max(0.0, seconds)
+        with self.running():
+            await self.sleep_until(target)
+        await self.settle()
 
     # -- internals ----------------------------------------------------------------------
     def _next_deadline(self) -> float | None:
@@ -395,13 +440,18 @@ class VirtualClock(Clock):
             return 1.0 if self._pace is None else min(self._pace, 1.0)
         return self._pace
 
+    def _anchor_now(self) -> None:
+        """Start the paced line here: virtual time now at real time now."""
+        pace = self._effective_pace()
+        self._anchor = None if pace is None else (self._t, self._real_time(), pace)
+
     def _real_wait(self, deadline: float) -> float:
         """Real seconds to wait before virtual time may reach ``deadline`` (0: now)."""
         pace = self._effective_pace()
         if pace is None:
             self._anchor = None
             return 0.0
-        real = time.monotonic()
+        real = self._real_time()
         anchor = self._anchor
         if anchor is None or anchor[2] != pace:
             anchor = self._anchor = (self._t, real, pace)

@@ -7,21 +7,30 @@
 - real devices are forbidden (``AFA_FORBID_REAL_DEVICES=1``) unless pytest runs with
   ``--afa-real-devices`` (hardware-in-the-loop runs): a mistyped device key then raises
   instead of writing to ``/dev/tty*``;
-- fixture ``virtual_clock``: a :class:`~afa.clock.VirtualClock` starting at 0.
+- fixture ``virtual_clock``: a :class:`~afa.clock.VirtualClock` starting at 0;
+- fixture ``afa_system``: a factory, ``afa_system(config, only=[...], devices={...})``,
+  of systems built from a configuration file on ``virtual_clock`` (not started: the test
+  starts it with ``async with``); real devices are off, so every device component
+  needs a fake under its component name in ``devices``.
+
+The user's guide is docs/testing.md (asyncio mode, fakes, device keys, configured
+parameters).
 """
 
 from __future__ import annotations
 
 import inspect
 import os
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable, Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from afa.clock import VirtualClock
-from afa.system import FORBID_REAL_DEVICES
+from afa.system import FORBID_REAL_DEVICES, System
 from afa.tasks import TaskGroup
+from afa.transport import DeviceFactory
 
 
 def pytest_addoption(parser: Any) -> None:
@@ -54,3 +63,27 @@ async def afa_tasks() -> AsyncIterator[TaskGroup]:
 def virtual_clock() -> VirtualClock:
     """Virtual time from 0: deterministic, instant."""
     return VirtualClock(start=0.0)
+
+
+#: What the ``afa_system`` fixture returns: ``make(config, *, only=None, devices=None,
+#: **options)`` -> System.
+SystemFactory = Callable[..., System]
+
+
+@pytest.fixture
+def afa_system(virtual_clock: VirtualClock) -> SystemFactory:
+    """Build a :class:`~afa.system.System` from a Miro XML configuration on the test's
+    ``virtual_clock``: ``afa_system(config, only=["GpsSokkiaService"],
+    devices={"GpsSokkiaService": fake.factory()})``. ``only`` keeps the named Launcher
+    entries, with their configured parameters; ``devices`` maps component names to fake
+    device factories; other ``options`` go to :meth:`System.from_xml`. Real devices
+    are off unless ``real_devices=True`` is passed."""
+
+    def make(config: str | Path, *, only: Iterable[str] | None = None,
+             devices: Mapping[str, DeviceFactory] | None = None, **options: Any) -> System:
+        options.setdefault("clock", virtual_clock)
+        options.setdefault("real_devices", False)
+        return System.from_xml(config, only=None if only is None else list(only),
+                               devices=devices, **options)
+
+    return make

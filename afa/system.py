@@ -271,9 +271,15 @@ class System:
 
     async def start(self) -> None:
         """Start every component in order; raises StartupError if any first start fails
-        (after stopping the ones that started)."""
+        (after stopping the ones that started). Time passes during start-up even on a
+        paused virtual clock (:meth:`Clock.running <afa.clock.Clock.running>`): start
+        delays and device handshakes take clock time."""
         if self._running:
             return
+        with self.clock.running():
+            await self._start()
+
+    async def _start(self) -> None:
         self._check_devices()
         self._running = True
         self._stopped = asyncio.Event()
@@ -317,6 +323,12 @@ class System:
         task. Raises TaskFailed if an owned task failed and nobody has been told."""
         if not self._running:
             return
+        with self.clock.running():  # a component's clean-up may wait on the clock
+            await self._stop()
+        if raise_failures:
+            self._raise_failures()
+
+    async def _stop(self) -> None:
         for name in reversed(list(self._supervisors)):
             await self.stop_component(name)
         while self._started_services:
@@ -334,8 +346,6 @@ class System:
         self.registry.unbind_owner(self)
         self._running = False
         self._stopped.set()
-        if raise_failures:
-            self._raise_failures()
 
     async def run(self, duration: float | None = None, *,
                   until: asyncio.Event | None = None) -> None:
@@ -346,7 +356,20 @@ class System:
         When the duration or ``until`` ends it, services with a ``finish_instant()``
         coroutine are awaited (a lock-step bridge lets every process finish the last
         instant), so that what happens at the end time is the same whether the system is
-        one process or several."""
+        one process or several.
+
+        With a ``duration`` or ``until``, time runs for the call even on a paused virtual
+        clock, which is paused again when it returns (``await system.run(10)`` in a
+        notebook cell: ten simulated seconds, then time stands still until the next
+        run). Without either, the clock is left to whoever owns it (a paused replay stays
+        paused until its player resumes it)."""
+        if duration is None and until is None:
+            await self._run(duration, until)
+            return
+        with self.clock.running():
+            await self._run(duration, until)
+
+    async def _run(self, duration: float | None, until: asyncio.Event | None) -> None:
         self._raise_failures()
         waiter = self._stopped.wait() if duration is None else self.clock.sleep(duration)
         waiters = [waiter, self._failed.wait(), self._stop_requested.wait()]

@@ -13,6 +13,8 @@ real codecs with fake devices, in virtual time, without sleeps::
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any
 
 from afa.clock import Clock, VirtualClock
 from afa.errors import ETimeOut
@@ -21,7 +23,7 @@ from afa.tasks import TaskGroup
 from afa.transport import ByteStream, DeviceSpec, MemoryByteStream, memory_pipe
 
 __all__ = ["VirtualClock", "memory_pipe", "MemoryByteStream", "FakeDevice", "TaskGroup", "settle",
-           "until", "serve"]
+           "until", "serve", "configured_parameters"]
 
 
 async def settle(clock: Clock | None = None) -> None:
@@ -52,3 +54,17 @@ def serve(stream: ByteStream) -> Callable[[DeviceSpec], Awaitable[ByteStream]]:
         return stream
 
     return factory
+
+
+def configured_parameters(config: str | Path, component: str) -> Any:
+    """The parameters configuration file ``config`` gives the component named
+    ``component`` (its Launcher name, e.g. ``"GpsSokkiaService"``), validated: the model
+    its class declares, as the running system would build it. Raises ConfigError for a
+    bad file or a name the Launcher does not list."""
+    from afa.errors import ConfigError
+    from afa.system import System
+
+    system = System.from_xml(config, only=[component], real_devices=False)
+    if component not in system.components:
+        raise ConfigError(f"{config}: no component {component!r} in its Launcher")
+    return system.components[component].parameters

@@ -35,7 +35,17 @@ from typing import Any, Literal, Protocol, TypeVar
 
 import numpy as np
 
-from afa import ByteStream, Clock, EDevIO, Event, SerialSpec, System, TcpSpec, registry
+from afa import (
+    ByteStream,
+    Clock,
+    EDevIO,
+    Event,
+    SerialSpec,
+    System,
+    TcpSpec,
+    VirtualClock,
+    registry,
+)
 from afa.component import Component
 from afa.ports import Direction, interface_name
 from afa.sim.oracle import HazardField, shortest_course
@@ -88,6 +98,8 @@ TRACK_STEP = 0.5
 TRACK_POINTS = 100_000
 
 F = TypeVar("F")
+#: A simulation runs once: new, running (started), stopped.
+Phase = Literal["new", "running", "stopped"]
 
 
 def served_name(system: System, interface: type[Any]) -> str | None:
@@ -150,6 +162,13 @@ class RaptorSimulation:
             await sim.system.run(60.0)
         sim.summary()
 
+    across notebook cells (time stands still between them; docs/notebooks.md)::
+
+        sim = RaptorSimulation.from_xml("configs/raptor.xml", clock=VirtualClock())
+        await sim.start()                    # started; the clock is paused
+        await sim.run_for(10)                # ten simulated seconds, then it stops
+        await sim.stop()                     # a new simulation for another run
+
     and the parts it is made of::
 
         sim = RaptorSimulation(world, clock, seed=...)
@@ -158,6 +177,8 @@ class RaptorSimulation:
         async with system, sim.running():    # physics, drive script
             await system.run(duration)
     """
+
+    _phase: Phase
 
     @staticmethod
     def default_world() -> Path:
@@ -184,23 +205,72 @@ class RaptorSimulation:
         return self._system
 
     async def __aenter__(self) -> RaptorSimulation:
-        await self.system.start()
+        self._begin()
         try:
-            self._running = self.running()
-            await self._running.__aenter__()
+            await self.system.start()
+            try:
+                self._running = self.running()
+                await self._running.__aenter__()
+            except BaseException:
+                await self.system.stop(raise_failures=False)
+                raise
         except BaseException:
-            await self.system.stop(raise_failures=False)
+            self._phase = "stopped"
+            await self.aclose()
             raise
         return self
 
     async def __aexit__(self, *exc_info: Any) -> None:
+        if self._phase != "running":
+            return
         try:
-            await self._running.__aexit__(*exc_info)
+            with self.clock.running():  # the physics' and emulators' clean-up
+                await self._running.__aexit__(*exc_info)
         finally:
             try:
                 await self.system.stop(raise_failures=exc_info[0] is None)
             finally:
                 await self.aclose()
+                self._phase = "stopped"
+
+    # -- across notebook cells ---------------------------------------------------------------
+    async def start(self) -> RaptorSimulation:
+        """Start the system and the physics, for use across notebook cells (``async
+        with`` cannot span cells); :meth:`stop` ends it. On a
+        :class:`~afa.clock.VirtualClock` time then stands still between calls: the clock
+        is paused once started, and runs only inside :meth:`run_for`,
+        :meth:`run_mission` or ``system.run`` (``clock.resume()`` lets it run on by
+        itself). A simulation runs once: starting it again raises RuntimeError saying
+        to build a new one."""
+        await self.__aenter__()
+        if isinstance(self.clock, VirtualClock):
+            self.clock.pause()
+        return self
+
+    async def stop(self) -> None:
+        """Stop the physics, the system and the emulators (see :meth:`start`); again:
+        nothing."""
+        await self.__aexit__(None, None, None)
+
+    async def run_for(self, seconds: float) -> None:
+        """Run ``seconds`` of simulated time and stop there (a started simulation;
+        paced if the clock is). Raises TaskFailed if the physics or a fake failed."""
+        if self._phase != "running":
+            raise RuntimeError("start the simulation first: await sim.start() "
+                               "(or async with sim:)")
+        await self.system.run(seconds)
+
+    def _begin(self) -> None:
+        if self._phase == "running":
+            raise RuntimeError("the simulation is already running")
+        if self._phase == "stopped":
+            raise RuntimeError(
+                "this simulation has run and stopped (its emulators are closed and its "
+                "vehicle is where the run left it); it cannot be started again: build a new "
+                "one, e.g. sim = RaptorSimulation.from_xml(config, world, clock=VirtualClock())")
+        if self._system is None:
+            raise RuntimeError("the simulation is not attached to a System")
+        self._phase = "running"
 
     def __init__(self, world: World | str | Path, clock: Clock, *, seed: int = 0,
                  geometry: GeometryModel | None = None, expose: bool = False,
@@ -248,6 +318,7 @@ class RaptorSimulation:
         self._mounts: dict[str, np.ndarray] = {}
         self._system: System | None = None
         self._observer: Any = None
+        self._phase: Phase = "new"
 
     # -- SimulatedWorld ------------------------------------------------------------------
     @property

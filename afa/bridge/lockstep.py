@@ -44,6 +44,8 @@ import json
 import logging
 import threading
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
 from afa.bridge import keys
@@ -79,6 +81,12 @@ class SteppedClock(VirtualClock):
     def resume(self) -> None:
         raise ComponentError("a SteppedClock moves only when the lock-step protocol "
                              "grants time; it cannot be resumed")
+
+    @contextmanager
+    def running(self) -> Iterator[None]:
+        """Nothing: a System starting, running or stopping on this clock waits for the
+        time master's grants, as everything else on it does."""
+        yield
 
     def next_deadline(self) -> float | None:
         """The earliest pending timer (monotonic seconds), or None."""
