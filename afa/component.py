@@ -383,6 +383,12 @@ class Component(Generic[P]):
         """Called after setup with the ports open (the PSR base starts its reactor)."""
 
     async def _deliver(self, port: Input) -> None:
+        """Deliver ``port``'s events to its handler until the component's life ends.
+
+        However else delivery ends (a handler that raises CancelledError, cancels its own
+        task or raises a BaseException that is not an Exception, a subscription that
+        closes under it), the component fails: a subscription never dies silently while
+        its component looks RUNNING and healthy."""
         subscription = port.subscription
         assert subscription is not None
         handler = port.handler
@@ -398,11 +404,21 @@ class Component(Generic[P]):
                 if result is not None:
                     await result
             except asyncio.CancelledError:
-                task = asyncio.current_task()
-                if task is not None and task.cancelling():
-                    raise  # the component is stopping
+                if self._stopping():
+                    raise  # the component is stopping (or a sibling task failed)
                 raise ComponentError(f"{self.name}: the handler of {port.name!r} raised "
                                      "CancelledError without being cancelled") from None
+            except BaseException as exc:
+                if isinstance(exc, (Exception, KeyboardInterrupt, SystemExit)):
+                    raise  # an Exception fails the component as it is; an exit exits
+                raise ComponentError(f"{self.name}: the handler of {port.name!r} raised "
+                                     f"{type(exc).__name__}: {exc}") from exc
+        if not self._stopping():
+            raise ComponentError(f"{self.name}: the subscription to {port.name!r} ended")
+
+    def _stopping(self) -> bool:
+        """Whether this component's current life is ending (its scope is closing)."""
+        return self._scope is None or self._scope.closing
 
     async def _release(self) -> None:
         for port in self._inputs:
