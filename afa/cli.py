@@ -24,8 +24,12 @@ EXIT_FAILURE = 1
 EXIT_INVALID = 2
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = _parser()
+LOG_LEVELS = ["debug", "info", "warning", "error"]
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "afa") -> int:
+    """The ``afa`` script; ``python -m afa`` passes its own ``prog`` for the usage."""
+    parser = _parser(prog)
     args = parser.parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()),
                         format="%(asctime)s %(levelname)-7s %(name)s: %(message)s")
@@ -44,12 +48,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_FAILURE
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(prog: str = "afa") -> argparse.ArgumentParser:
+    from afa import __version__
+
     parser = argparse.ArgumentParser(
-        prog="python -m afa",
+        prog=prog,
         description="afa: the Architecture for Autonomy (DRDC Raptor UGV) on asyncio.")
-    parser.add_argument("--log-level", default="warning",
-                        choices=["debug", "info", "warning", "error"], help="logging level")
+    parser.add_argument("--version", action="version", version=f"afa {__version__}")
+    parser.add_argument("--log-level", default="warning", choices=LOG_LEVELS,
+                        help="logging level (default warning; also after the command)")
     commands = parser.add_subparsers(required=True, metavar="COMMAND")
 
     run = commands.add_parser("run", help="run the components a configuration file enables")
@@ -125,7 +132,19 @@ def _parser() -> argparse.ArgumentParser:
     from afa.tools.cli import add_parsers as add_tool_parsers
 
     add_tool_parsers(commands)
+    _log_level_everywhere(parser)
     return parser
+
+
+def _log_level_everywhere(parser: argparse.ArgumentParser) -> None:
+    """Accept ``--log-level`` after any command too (``afa run X --log-level info``); given
+    there, it overrides the one before the command."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for command in action.choices.values():
+                command.add_argument("--log-level", default=argparse.SUPPRESS,
+                                     choices=LOG_LEVELS, help="logging level (default warning)")
+                _log_level_everywhere(command)
 
 
 def _log_parsers(commands: Any) -> None:

@@ -101,3 +101,35 @@ def test_an_unknown_world_name_is_explained(capsys):
     assert main(["run", str(RAPTOR), "--sim", "--fast", "--world", "rock-feild"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'rock-field'" in err and "shipped worlds:" in err
+
+
+def test_version_and_the_scripts_own_name_in_its_usage(capsys):
+    import pytest
+
+    from afa import __version__
+
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"afa {__version__}"
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert capsys.readouterr().out.startswith("usage: afa ")  # the `afa` script
+    with pytest.raises(SystemExit):
+        main(["--help"], prog="python -m afa")
+    assert capsys.readouterr().out.startswith("usage: python -m afa ")
+
+
+def test_log_level_is_accepted_before_and_after_the_command():
+    from afa.cli import _parser
+
+    parser = _parser()
+    assert parser.parse_args(["config", "check", "x.xml"]).log_level == "warning"
+    assert parser.parse_args(["--log-level", "info", "config", "check", "x.xml"]) \
+        .log_level == "info"
+    assert parser.parse_args(["config", "check", "x.xml", "--log-level", "debug"]) \
+        .log_level == "debug"
+    assert parser.parse_args(["run", "x.xml", "--sim", "--log-level", "error"]) \
+        .log_level == "error"
+    assert parser.parse_args(["log", "info", "r.mcap", "--log-level", "info"]) \
+        .log_level == "info"
