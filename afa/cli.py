@@ -10,8 +10,8 @@ import logging
 import signal
 import sys
 import time
-from collections.abc import AsyncIterator, Callable, Sequence
-from contextlib import asynccontextmanager
+from collections.abc import AsyncIterator, Callable, Iterator, Sequence
+from contextlib import asynccontextmanager, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -25,14 +25,14 @@ EXIT_INVALID = 2
 
 
 LOG_LEVELS = ["debug", "info", "warning", "error"]
+LOG_FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "afa") -> int:
     """The ``afa`` script; ``python -m afa`` passes its own ``prog`` for the usage."""
     parser = _parser(prog)
     args = parser.parse_args(argv)
-    logging.basicConfig(level=getattr(logging, args.log_level.upper()),
-                        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s")
+    logging.basicConfig(level=getattr(logging, args.log_level.upper()), format=LOG_FORMAT)
     handler: Callable[[argparse.Namespace], Any] = args.handler
     try:
         if inspect.iscoroutinefunction(handler):  # the text tools (afa.tools)
@@ -382,8 +382,6 @@ def _simulator() -> Any:
 
 async def _run_system(args: argparse.Namespace) -> int:
     from afa.clock import Clock, VirtualClock, WallClock
-    from afa.errors import StartupError, TaskFailed
-    from afa.system import System
 
     clock: Clock
     if args.fast:
@@ -392,10 +390,46 @@ async def _run_system(args: argparse.Namespace) -> int:
         clock = VirtualClock(pace=args.realtime_factor)
     else:
         clock = WallClock()
-    from afa.bridge.runner import lockstep_clock, system_options
-    from afa.bridge.runner import summary as bridge_summary
+    from afa.bridge.runner import lockstep_clock
 
     clock = lockstep_clock(args) or clock  # a process group in lock-step (decision 0011)
+    with _log_times(clock):
+        return await _run_on(args, clock)
+
+
+@contextmanager
+def _log_times(clock: Any) -> Iterator[None]:
+    """In virtual time (``--fast``, ``--realtime-factor``), stamp log lines with the clock's
+    seconds since the run began (``t=  12.345``) instead of wall-clock dates; the root
+    handlers' formatters are restored afterwards."""
+    from afa.clock import VirtualClock
+
+    handlers = logging.getLogger().handlers
+    if not isinstance(clock, VirtualClock) or not handlers:
+        yield
+        return
+    start = clock.monotonic()
+
+    class ClockFormatter(logging.Formatter):
+        def formatTime(self, record: logging.LogRecord, datefmt: str | None = None) -> str:
+            return f"t={clock.monotonic() - start:9.3f}"
+
+    saved = [handler.formatter for handler in handlers]
+    for handler in handlers:
+        handler.setFormatter(ClockFormatter(LOG_FORMAT))
+    try:
+        yield
+    finally:
+        for handler, formatter in zip(handlers, saved, strict=True):
+            handler.setFormatter(formatter)
+
+
+async def _run_on(args: argparse.Namespace, clock: Any) -> int:
+    from afa.bridge.runner import summary as bridge_summary
+    from afa.bridge.runner import system_options
+    from afa.errors import StartupError, TaskFailed
+    from afa.system import System
+
     simulation = None
     options: dict[str, Any] = {"strict": args.strict, "clock": clock, **system_options(args)}
     if args.sim:
@@ -426,8 +460,9 @@ async def _run_system(args: argparse.Namespace) -> int:
     clock_start = clock.monotonic()
     try:
         async with _serving(console), system:
-            for note in system.notes:
-                print(f"afa: {note}", file=sys.stderr)
+            if not logging.getLogger("afa.system").isEnabledFor(logging.WARNING):
+                for note in system.notes:  # logged as warnings, unless those are hidden
+                    print(f"afa: {note}", file=sys.stderr)
             duration, finished = args.duration, None
             if simulation is not None and duration is None:
                 # a simulated run ends with its mission (or drive script), or at its limit

@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -133,3 +134,36 @@ def test_log_level_is_accepted_before_and_after_the_command():
         .log_level == "error"
     assert parser.parse_args(["log", "info", "r.mcap", "--log-level", "info"]) \
         .log_level == "info"
+
+
+def test_fast_runs_log_virtual_time_and_start_up_notes_appear_once(tmp_path):
+    """Log lines of a --fast run carry the virtual seconds since the run began (not a
+    wall-clock date, nor the virtual clock's 2005 epoch); a start-up note (a component
+    not implemented yet) is printed once, not as a log line and again as 'afa: ...'."""
+    entry = ('<parameter><parameter name="Name" value="futureThing"/>'
+             '<parameter name="Type" value="FutureThing"/></parameter>')
+    text = RAPTOR.read_text().replace(
+        '<parameter name="Components">', '<parameter name="Components">' + entry, 1)
+    config = tmp_path / "raptor.xml"
+    config.write_text(text.replace('value="050917raptor01.XML"',
+                                   f'value="{RAPTOR.parent / "050917raptor01.XML"}"'))
+    script = (
+        "import sys\n"
+        "from afa import registry\n"
+        "from afa.cli import main\n"
+        "from components.arcs import ArcSetParameters\n"
+        "registry.register('FutureThing', registry.not_implemented(\n"
+        "    'FutureThing', ArcSetParameters, 'a capability not written yet'))\n"
+        "sys.exit(main(sys.argv[1:]))\n")
+    result = subprocess.run(
+        [sys.executable, "-c", script, "run", str(config), "--sim", "--fast", "--duration",
+         "1", "--log-level", "info"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count("futureThing (FutureThing) is configured but not "
+                               "implemented yet") == 1, result.stderr
+    logged = [line for line in result.stderr.splitlines() if " INFO " in line]
+    assert logged, result.stderr
+    stamps = [re.match(r"t=\s*(\d+\.\d{3}) INFO ", line) for line in logged]
+    assert all(stamps), logged
+    assert all(0.0 <= float(m.group(1)) <= 5.0 for m in stamps if m)
+    assert "2005" not in result.stderr and "1126" not in result.stderr
