@@ -217,14 +217,25 @@ def _catalog(path: Path) -> Any:
 
 
 def _config_check(args: argparse.Namespace) -> int:
+    from afa.system import System
+
     config = _load(args.config)
-    warnings = _catalog(args.config).problems()
+    system = System.from_xml(args.config, real_devices=False)
+    warnings = [f"{args.config}: warning: {line}" for line in system.catalog().problems()]
+    lines = dict(zip((entry.Name for entry in config.launcher.Components),
+                     config.launcher_lines, strict=False))
+    for device, users in system.port_conflicts().items():
+        first = min(lines.get(name, 0) for name, _ in users)
+        named = ", ".join(f"{name} at {baud}" for name, baud in users)
+        warnings.append(f"{args.config}:{first}: warning: serial port {device} is named by "
+                        f"components at different baud rates ({named}): one connection "
+                        "cannot serve both; give each device its own port")
     for line in warnings:
-        print(f"{args.config}: warning: {line}", file=sys.stderr)
+        print(line, file=sys.stderr)
     count = sum(len(sets) for sets in config.sections.values())
     print(f"{args.config}: valid ({len(config.sections)} sections, {count} parameter sets, "
           f"robot {config.robot!r}, {len(config.launcher.Components)} launcher entries"
-          f"{f', {len(warnings)} wiring warning(s)' if warnings else ''})")
+          f"{f', {len(warnings)} warning(s)' if warnings else ''})")
     return EXIT_OK
 
 
@@ -625,6 +636,7 @@ def _maps_line(maps: dict[str, Any]) -> str:
 
 def _print_summary(summary: dict[str, Any]) -> None:
     events = sum(summary["events"].values())
+    unhealthy = sum(not info["healthy"] for info in summary["components"].values())
     if "world" in summary:
         pose = summary.get("pose_error") or {}
         print(f"world {summary['world']}: {summary['distance_m']:.1f} m driven, "
@@ -645,7 +657,8 @@ def _print_summary(summary: dict[str, Any]) -> None:
         print(_maps_line(summary["maps"]))
     print(f"ran {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s wall; "
           f"{events} events, {summary['events_dropped']} dropped; "
-          f"{len(summary['component_errors'])} component(s) with errors")
+          f"{len(summary['component_errors'])} component(s) with errors"
+          + (f", {unhealthy} of {len(summary['components'])} unhealthy" if unhealthy else ""))
     for name, info in summary["components"].items():
         flag = "ok" if info["healthy"] else f"UNHEALTHY {info['detail']}".strip()
         if not info["ever_healthy"]:

@@ -1,6 +1,7 @@
 """``python -m afa config ...``: check, show, defaults, and one-line errors for bad files."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -37,7 +38,9 @@ def test_show_json_holds_every_annex_a_parameter_with_the_seed_value(capsys):
         for name, _seed_text, expected in rows:
             assert name in values, f"{table} {name} missing from config show"
             if (section, name) in DEVIATIONS:  # documented departures from the seed
-                assert values[name] == float(DEVIATIONS[section, name]), f"{table} {name}"
+                deviation = DEVIATIONS[section, name]
+                expected_value = deviation if isinstance(values[name], str) else float(deviation)
+                assert values[name] == expected_value, f"{table} {name}"
             elif expected is not NA:
                 assert values[name] == expected, f"{table} {name}: {values[name]!r}"
     assert shown["Robot"]["default"]["Name"] == "Raptor"
@@ -193,3 +196,51 @@ def test_unimplemented_components_are_reported_and_strict_refuses_them(tmp_path)
             System.from_xml(config, strict=True)
     finally:
         registry._registered.pop("FutureThing", None)
+
+
+@pytest.mark.parametrize("wrong, hint", [("GPSSokkia", "did you mean 'GpsSokkia'?"),
+                                         ("Foo", "installed types:")])
+def test_check_refuses_an_unknown_component_type_at_its_line(tmp_path, capsys, wrong, hint):
+    """Issue 16, defect 2: `config check`, not only `run`, refuses a Launcher Type that
+    no installed component has, with file:line: and a suggestion."""
+    path, _ = mutate(tmp_path, '<parameter name="Type" value="GpsSokkia"/>',
+                     f'<parameter name="Type" value="{wrong}"/>')
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1)
+                if f'value="{wrong}"' in text)
+    code, out, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2 and "valid" not in out
+    assert err.startswith(f"{path}:{line}: Launcher/Components[")
+    assert f"unknown component type '{wrong}'" in err and hint in err
+
+
+def test_check_warns_when_two_devices_share_a_port_at_different_rates(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "config", "check", str(RAPTOR))
+    assert code == 0 and "serial port" not in err  # the shipped file: one port each
+    path, _ = mutate(tmp_path, '<parameter name="Device" value="/dev/ttyUSB1"/>',
+                     '<parameter name="Device" value="/dev/ttyUSB0"/>')
+    code, out, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 0 and "1 warning(s)" in out
+    assert re.search(rf"^{re.escape(str(path))}:\d+: warning: serial port /dev/ttyUSB0 ", err,
+                     re.M), err
+    assert "3dmgService at 38400" in err and "GpsSokkiaService at 57600" in err
+    # the MPC555's two components share /dev/ttyS0 at one rate: that is no conflict
+    assert "/dev/ttyS0" not in err
+
+
+async def test_a_shared_serial_port_refuses_a_second_baud_rate():
+    """At run time the second component on a port opened at another rate gets EDevIO
+    (and stays unhealthy) instead of silently talking at the first one's rate."""
+    from afa.errors import EDevIO
+    from afa.transport import DeviceOpener, PtyDeviceStream, SerialSpec
+
+    device = PtyDeviceStream()
+    opener = DeviceOpener()
+    try:
+        first = await opener.open("Imu", SerialSpec(device.path, 38400))
+        same = await opener.open("Imu2", SerialSpec(device.path, 38400))
+        with pytest.raises(EDevIO, match="shared with another component at 38400 baud"):
+            await opener.open("Gps", SerialSpec(device.path, 57600))
+        await first.close()
+        await same.close()
+    finally:
+        await device.close()

@@ -64,10 +64,12 @@ def test_real_device_mode_with_no_devices_says_the_stack_never_came_up(tmp_path)
         [sys.executable, "-m", "afa", "run", str(config), "--duration", "1", "--summary",
          str(summary)], capture_output=True, text=True, timeout=120, cwd=tmp_path,
         # every device this file names is absent or refused: real-device mode, safely
-        env={k: v for k, v in os.environ.items() if k != "AFA_FORBID_REAL_DEVICES"})
+        env={**{k: v for k, v in os.environ.items() if k != "AFA_FORBID_REAL_DEVICES"},
+             "PYTHONPATH": str(ROOT)})  # this checkout's afa, wherever afa is installed
     assert result.returncode == 1, result.stderr
     assert "the stack never came up" in result.stderr
     assert "No devices found; did you mean --sim?" in result.stderr
+    assert re.search(r"0 component\(s\) with errors, 1[0-9] of 16 unhealthy", result.stdout)
     assert "Traceback" not in result.stderr
     data = json.loads(summary.read_text())
     components = data["components"]
