@@ -40,12 +40,27 @@ def main(argv: Sequence[str] | None = None, prog: str = "afa") -> int:
         return handler(args)  # type: ignore[no-any-return]
     except KeyboardInterrupt:
         return EXIT_OK
+    except BrokenPipeError:  # `afa decode gps FILE | head`: the reader has had enough
+        _silence_stdout()
+        return EXIT_OK
     except ConfigError as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_INVALID
     except AfaError as exc:
         print(f"afa: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+
+
+def _silence_stdout() -> None:
+    """Point standard output at /dev/null, so that Python's own flush at exit does not
+    complain about the closed pipe once more."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # no real file behind stdout
+        pass
 
 
 def _parser(prog: str = "afa") -> argparse.ArgumentParser:
@@ -304,18 +319,42 @@ def _decode(args: argparse.Namespace) -> int:
             inner = getattr(message, "message", None)  # framed links wrap the message
             kind = type(inner if dataclasses.is_dataclass(inner) else message).__name__
             record = {"type": kind, **_jsonable(dataclasses.asdict(message))}
-            print(json.dumps(record))
+            print(json.dumps(record, allow_nan=False))
     stats = decoder.stats
     print(json.dumps({"statistics": {"messages": messages, "checksum_failures":
                                      stats.checksum_failures, "malformed": stats.malformed,
                                      "bytes_skipped": stats.bytes_skipped + decoder.buffered,
                                      "bytes": len(data)}}))
+    if messages == 0:
+        sys.stdout.flush()
+        print(f"afa decode: nothing decoded from {args.file} as {args.device} "
+              f"({len(data)} bytes{_other_decoders(args.device, data)})", file=sys.stderr)
+        return EXIT_FAILURE
     return EXIT_OK
+
+
+def _other_decoders(device: str, data: bytes) -> str:
+    """What the other decoders make of (the first 64 KiB of) ``data``, for a hint."""
+    from afa import registry
+
+    if not data:
+        return ": the input is empty"
+    sample, found = data[:65536], []
+    for name in registry.decoders():
+        if name != device:
+            count = len(registry.load_decoder(name)().feed(sample))
+            if count:
+                found.append((count, name))
+    if not found:
+        return "; no other decoder finds anything in it either"
+    count, name = max(found)
+    return f"; is it a {name} capture? the {name} decoder finds {count} message(s) in it"
 
 
 def _jsonable(value: Any) -> Any:
     import datetime
     import enum
+    import math
 
     import numpy as np
 
@@ -326,7 +365,9 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):
-        return value.item()
+        return _jsonable(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None  # JSON has no NaN or infinity: a missing value
     if isinstance(value, enum.Enum):
         return value.value if isinstance(value.value, (str, int, float)) else value.name
     if isinstance(value, bytes):

@@ -169,3 +169,54 @@ def test_fast_runs_log_virtual_time_and_start_up_notes_appear_once(tmp_path):
     assert all(stamps), logged
     assert all(0.0 <= float(m.group(1)) <= 5.0 for m in stamps if m)
     assert "2005" not in result.stderr and "1126" not in result.stderr
+
+
+GPS_CAPTURE = ROOT / "tests" / "data" / "gps" / "swri_binary.bin"
+
+
+def test_decode_into_a_closed_pipe_ends_quietly(tmp_path):
+    """`afa decode gps FILE | head`: no BrokenPipeError traceback when the reader stops."""
+    big = tmp_path / "big.bin"
+    big.write_bytes(GPS_CAPTURE.read_bytes() * 400)  # far more output than a pipe holds
+    process = subprocess.Popen([sys.executable, "-m", "afa", "decode", "gps", str(big)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    assert process.stdout is not None and process.stderr is not None
+    with process:
+        first = process.stdout.readline()
+        process.stdout.close()  # what head does after its lines
+        err = process.stderr.read().decode()
+        assert process.wait(timeout=60) == 0, err
+    assert json.loads(first)["type"] and err == ""
+
+
+def test_decode_with_the_wrong_device_says_nothing_was_decoded(capsys):
+    assert main(["decode", "imu", str(GPS_CAPTURE)]) == 1
+    out, err = capsys.readouterr()
+    assert json.loads(out.splitlines()[-1])["statistics"]["messages"] == 0
+    assert f"nothing decoded from {GPS_CAPTURE} as imu" in err
+    assert "is it a gps capture?" in err
+
+
+def test_decode_prints_a_non_finite_number_as_json_null(tmp_path, capsys):
+    import dataclasses
+    import math
+
+    from components.gps_sokkia.codec import BestPos, GpsDecoder, encode_bestpos_binary
+
+    ascii_capture = ROOT / "tests" / "data" / "gps" / "swri_ascii_nmea.log"
+    fix = next(m for m in GpsDecoder().feed(ascii_capture.read_bytes())
+               if isinstance(m, BestPos))
+    fix = dataclasses.replace(fix, header=dataclasses.replace(fix.header, port="COM1"),
+                              latitude_deg=math.nan, height_msl_m=math.inf)
+    capture = tmp_path / "nan.bin"
+    capture.write_bytes(encode_bestpos_binary(fix))
+    assert main(["decode", "gps", str(capture)]) == 0
+
+    def refuse(constant):
+        raise AssertionError(f"not JSON: {constant}")
+
+    records = [json.loads(line, parse_constant=refuse)
+               for line in capsys.readouterr().out.splitlines()]
+    assert records[0]["type"] == "BestPos"
+    assert records[0]["latitude_deg"] is None and records[0]["height_msl_m"] is None
+    assert records[0]["longitude_deg"] == fix.longitude_deg
