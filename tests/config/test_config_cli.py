@@ -98,7 +98,7 @@ def test_bad_files_give_exit_2_and_file_line_messages(case, tmp_path, capsys):
     assert len(messages) == 1, messages
     assert messages[0].startswith(f"{path}:")
     assert expected in messages[0]
-    if case not in ("syntax error", "missing instance"):
+    if case != "missing instance":  # (that one is reported at its Launcher entry)
         assert messages[0].startswith(f"{path}:{line}:"), (messages[0], line)
 
 
@@ -244,3 +244,38 @@ async def test_a_shared_serial_port_refuses_a_second_baud_rate():
         await same.close()
     finally:
         await device.close()
+
+
+@pytest.mark.parametrize("old, new", [
+    ('<parameter name="EventName" value="Imu"/>', '<parameter name="EventName" value="Imu/>'),
+    ('<parameter name="EventName" value="Imu"/>', '<parameter name="EventName" value=Imu/>'),
+    ('<parameter name="Device" value="/dev/ttyUSB0"/>',
+     '<parameter name="Device" value="/dev/ttyUSB0">'),
+], ids=["unclosed quote", "unquoted value", "element left open"])
+def test_an_xml_syntax_error_is_reported_at_the_line_that_caused_it(old, new, tmp_path,
+                                                                    capsys):
+    """Not at the end tag or the next line, where the parser noticed it."""
+    path, line = mutate(tmp_path, old, new)
+    code, _, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2
+    assert err.startswith(f"{path}:{line}: XML syntax error: "), (err, line)
+
+
+@pytest.mark.parametrize("section", ["ImuConfig", "StereoConfig", "GpsSokkiaConfig"])
+def test_a_deleted_section_suggests_no_unrelated_one(section, tmp_path, capsys):
+    text = RAPTOR.read_text()
+    start = text.index(f'<section name="{section}">')
+    end = text.index("</section>", start) + len("</section>")
+    path = tmp_path / "raptor.xml"
+    path.write_text(text[:start] + text[end:])
+    code, _, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2
+    assert f"section {section!r} is missing" in err
+    assert "did you mean" not in err, err
+
+
+def test_a_misspelt_section_is_still_suggested(tmp_path, capsys):
+    path, _ = mutate(tmp_path, '<parameter name="Section" value="ImuConfig"/>',
+                     '<parameter name="Section" value="ImuConfg"/>')
+    code, _, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2 and "did you mean 'ImuConfig'?" in err
