@@ -282,8 +282,16 @@ def _config_defaults(args: argparse.Namespace) -> int:
     text = defaults_document()
     if args.output is None:
         sys.stdout.write(text)
-    else:
+        return EXIT_OK
+    try:
         args.output.write_text(text)
+    except OSError as exc:
+        print(f"afa config defaults: cannot write {args.output}: {exc.strerror or exc}",
+              file=sys.stderr)
+        return EXIT_INVALID
+    print(f"{args.output}: every component type with its defaults; run it with "
+          f"`afa run {args.output} --sim` (`afa config check {args.output}` for what to "
+          "change before a vehicle)", file=sys.stderr)
     return EXIT_OK
 
 

@@ -59,6 +59,41 @@ def test_defaults_writes_a_file_that_validates(tmp_path, capsys):
     config = load_configuration(target)
     assert config.parameters("NodLaser").Motorrates == 15.0
     assert config.parameters("ArcArbiter").StaleVoteTimeUSec == 500000
+    assert config.parameters("CandidateArcs").Count == 27  # the shared section's name
+
+
+def test_defaults_launch_every_component_type_and_the_file_runs(tmp_path, capsys):
+    """A newcomer's `config defaults -o FILE` then `afa run FILE --sim` starts the stack
+    (it used to write no Launcher entries, so running it started nothing)."""
+    import os
+
+    from afa import System, registry
+
+    target = tmp_path / "defaults.xml"
+    code, _, err = run_cli(capsys, "config", "defaults", "-o", str(target))
+    assert code == 0 and "--sim" in err
+    config = load_configuration(target)
+    types = [entry.Type for entry in config.launcher.Components]
+    implemented = [t for t in registry.component_types()
+                   if registry.is_implemented(registry.load_component(t))]
+    assert sorted(types) == sorted(implemented)
+    assert types.index("NodLaser") < types.index("ModelServer") < types.index("ArcArbiter")
+    enabled = {entry.Type for entry in config.launcher.Components if entry.Enabled}
+    assert "LogNotify" not in enabled  # it would write a recording
+    assert set(System.from_xml(target, real_devices=False).components) == enabled
+    summary = tmp_path / "summary.json"
+    result = subprocess.run(  # from a directory with no geometry file beside the config
+        [sys.executable, "-m", "afa", "run", str(target), "--sim", "--fast", "--duration", "10",
+         "--summary", str(summary)], capture_output=True, text=True, timeout=120,
+        cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert result.returncode == 0, result.stderr
+    data = json.loads(summary.read_text())
+    assert data["stack_up"] and data["distance_m"] > 1.0  # the autonomous stack drove
+
+
+def test_defaults_into_a_missing_directory_is_a_clean_error(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "config", "defaults", "-o", str(tmp_path / "no" / "d.xml"))
+    assert code == 2 and "cannot write" in err and "Traceback" not in err
 
 
 def mutate(tmp_path, old, new, count=1):
