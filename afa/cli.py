@@ -497,6 +497,8 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
         world = _world_path(args.world) if args.world else simulation_cls.default_world()
         simulation = simulation_cls(world, clock, seed=args.seed, expose=args.expose,
                                     teleop=args.teleop)
+        if args.expose:
+            simulation.announce = _print_endpoint
         options["devices"] = simulation.device_for
     system = System.from_xml(args.config, **options)
     if simulation is not None and args.process and not simulation.fakes:
@@ -573,6 +575,12 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
               f"{summary['sim_time_s']:.0f} s).", file=sys.stderr)
         return EXIT_FAILURE
     return EXIT_OK
+
+
+def _print_endpoint(component: str, endpoint: str) -> None:
+    """``--expose``: where each emulated device is served (a pseudo-terminal a serial
+    tool can open, or a loopback TCP port)."""
+    print(f"afa: {component} emulated on {endpoint}", file=sys.stderr, flush=True)
 
 
 def _console(args: argparse.Namespace, system: Any, simulation: Any) -> Any:

@@ -220,3 +220,18 @@ def test_decode_prints_a_non_finite_number_as_json_null(tmp_path, capsys):
     assert records[0]["type"] == "BestPos"
     assert records[0]["latitude_deg"] is None and records[0]["height_msl_m"] is None
     assert records[0]["longitude_deg"] == fix.longitude_deg
+
+
+def test_expose_prints_where_each_emulated_device_is_served():
+    """`--expose` prints its pseudo-terminals and TCP ports whatever the log level (a
+    newcomer needs them to attach a serial tool or a laser client)."""
+    result = subprocess.run(
+        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--sim", "--expose", "--duration",
+         "2", "--log-level", "error"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    served = dict(re.findall(r"^afa: (\S+) emulated on (\S+)$", result.stderr, re.M))
+    assert sorted(served) == sorted(
+        ["NodLaserService", "NodLaserService12", "3dmgService", "GpsSokkiaService",
+         "RaptorOdometryService", "RaptorService"]), result.stderr
+    assert served["3dmgService"].startswith("/dev/pts/")
+    assert re.fullmatch(r"127\.0\.0\.1:\d+", served["NodLaserService"])
+    assert served["RaptorService"] == served["RaptorOdometryService"]  # one MPC555 link
