@@ -187,7 +187,7 @@ class Component(Generic[P]):
         self.parameters: P = parameters  # type: ignore[assignment]
         self.type_name = type(self).__name__
         self.state = State.CREATED
-        self.log = logging.getLogger(f"afa.component.{name}")
+        self.log = _component_logger(name)
         self.restarts = 0
         self.failures = 0
         self.last_error: BaseException | None = None
@@ -440,6 +440,30 @@ class Component(Generic[P]):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} {self.state.value}>"
+
+
+class _NamesItsComponent(logging.Filter):
+    """Puts the component's name at the front of a message that does not name it, so a
+    warning printed without a formatter (Python's last-resort handler in a notebook shows
+    only the message) still says which component it is about."""
+
+    def __init__(self, component: str) -> None:
+        super().__init__()
+        self.component = component
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if self.component not in message:
+            record.msg, record.args = f"{self.component}: {message}", None
+        return True
+
+
+def _component_logger(name: str) -> logging.Logger:
+    """``afa.component.NAME``, whose messages name the component."""
+    logger = logging.getLogger(f"afa.component.{name}")
+    if not any(isinstance(f, _NamesItsComponent) for f in logger.filters):
+        logger.addFilter(_NamesItsComponent(name))
+    return logger
 
 
 def _unattached_proxy(interface: type[InterfaceT], name: str) -> InterfaceT:

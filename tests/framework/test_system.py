@@ -435,3 +435,25 @@ def test_components_are_typed_by_their_parameter_model():
     assert isinstance(gps.parameters, GpsSokkiaParameters)
     with pytest.raises(ComponentError, match="expected GpsSokkiaParameters"):
         GpsSokkia("Gps", Tick(n=1))  # type: ignore[arg-type]
+
+
+async def test_a_components_log_messages_name_it_without_a_formatter(caplog):
+    """In a notebook with no logging set up, Python prints a warning's message alone:
+    a component's messages must say which component they are about (once)."""
+    clock = VirtualClock(start=0.0)
+
+    class Chatty(SubscribePublishServer):
+        async def run(self):
+            self.log.warning("no fix for %d s", 3)
+            self.log.warning("%s: already named", self.name)
+            self.log.info("the %s component is up", self.name)
+
+    chatty = Chatty("Chatty")
+    caplog.set_level("INFO", logger="afa.component.Chatty")
+    async with System([chatty], clock=clock):
+        await clock.advance(0.1)
+    messages = [r.getMessage() for r in caplog.records if r.name == "afa.component.Chatty"]
+    assert "Chatty: no fix for 3 s" in messages
+    assert "Chatty: already named" in messages
+    assert "the Chatty component is up" in messages
+    assert all(m.count("Chatty") == 1 for m in messages), messages
