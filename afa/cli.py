@@ -563,9 +563,17 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
                 for name, info in summary["components"].items()
                 if not info["ever_healthy"] and not info["waiting"]]
         hint = ""
-        if not args.sim and any("cannot open device" in info["detail"]
-                                for info in summary["components"].values()):
-            hint = " No devices found; did you mean --sim?"
+        if not args.sim:
+            from afa.component import PublishServerReactor
+
+            drivers = [summary["components"][name] for name, component
+                       in system.components.items()
+                       if isinstance(component, PublishServerReactor)
+                       and name in summary["components"]]
+            if any("cannot open device" in info["detail"] for info in drivers):
+                hint = " No devices found; did you mean --sim?"
+            elif drivers and not any(info["ever_healthy"] for info in drivers):
+                hint = " No device answered; did you mean --sim?"
         print(f"afa run: the stack never came up: {'; '.join(down)}.{hint}", file=sys.stderr)
         return EXIT_FAILURE
     if (simulation is not None and args.duration is None and not stop.is_set()

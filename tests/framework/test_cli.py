@@ -235,3 +235,46 @@ def test_expose_prints_where_each_emulated_device_is_served():
     assert served["3dmgService"].startswith("/dev/pts/")
     assert re.fullmatch(r"127\.0\.0\.1:\d+", served["NodLaserService"])
     assert served["RaptorService"] == served["RaptorOdometryService"]  # one MPC555 link
+
+
+def test_real_device_mode_with_silent_devices_says_none_answered(tmp_path, monkeypatch,
+                                                                 capsys):
+    """Ports that open but never speak (a serial port with nothing on it, an address
+    that accepts and sends nothing): the stack never came up and no device answered."""
+    import socket
+
+    monkeypatch.delenv("AFA_FORBID_REAL_DEVICES", raising=False)
+    ptys = [os.openpty() for _ in range(3)]  # serial ports nobody answers on
+    listener = socket.create_server(("127.0.0.1", 0))  # accepts, never sends
+    port = listener.getsockname()[1]
+    try:
+        text = RAPTOR.read_text()
+        for device, (_, terminal) in zip(("/dev/ttyUSB0", "/dev/ttyUSB1", "/dev/ttyS0"), ptys,
+                                         strict=True):
+            text = text.replace(f'value="{device}"', f'value="{os.ttyname(terminal)}"')
+        for host in ("131.135.74.200", "131.135.74.201"):
+            text = text.replace(f'value="{host}"', 'value="127.0.0.1"')
+        text = text.replace('name="Port" value="24750"', f'name="Port" value="{port}"')
+        text = text.replace('value="050917raptor01.XML"',
+                            f'value="{RAPTOR.parent / "050917raptor01.XML"}"')
+        config = tmp_path / "raptor-silent.xml"
+        config.write_text(text)
+        assert main(["run", str(config), "--duration", "1"]) == 1
+    finally:
+        listener.close()
+        for fds in ptys:
+            for fd in fds:
+                os.close(fd)
+    err = capsys.readouterr().err
+    assert "the stack never came up" in err
+    assert "No device answered; did you mean --sim?" in err
+
+
+def test_run_help_lists_the_shipped_worlds(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    out = " ".join(capsys.readouterr().out.split())  # argparse wraps the help text
+    for world in ("rock-field", "open-field", "slalom"):
+        assert world in out.replace("- ", "-")
