@@ -352,7 +352,8 @@ async def test_the_watchdog_stop_is_a_warning_only_when_the_vehicle_was_told_to_
         await clock.advance(1.0)
         stats = vc.statistics()
     assert stats["watchdog_stops"] == 1
-    records = [r for r in caplog.records if r.getMessage().startswith("command watchdog")]
+    records = [r for r in caplog.records
+               if r.getMessage().removeprefix("VC: ").startswith("command watchdog")]
     assert [r.levelname for r in records] == [level]
     assert "t=" not in records[0].getMessage()  # no absolute clock stamp in the message
 
