@@ -10,8 +10,8 @@ import logging
 import signal
 import sys
 import time
-from collections.abc import AsyncIterator, Callable, Sequence
-from contextlib import asynccontextmanager
+from collections.abc import AsyncIterator, Callable, Iterator, Sequence
+from contextlib import asynccontextmanager, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -24,17 +24,24 @@ EXIT_FAILURE = 1
 EXIT_INVALID = 2
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = _parser()
+LOG_LEVELS = ["debug", "info", "warning", "error"]
+LOG_FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "afa") -> int:
+    """The ``afa`` script; ``python -m afa`` passes its own ``prog`` for the usage."""
+    parser = _parser(prog)
     args = parser.parse_args(argv)
-    logging.basicConfig(level=getattr(logging, args.log_level.upper()),
-                        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s")
+    logging.basicConfig(level=getattr(logging, args.log_level.upper()), format=LOG_FORMAT)
     handler: Callable[[argparse.Namespace], Any] = args.handler
     try:
         if inspect.iscoroutinefunction(handler):  # the text tools (afa.tools)
             return asyncio.run(handler(args))  # type: ignore[no-any-return]
         return handler(args)  # type: ignore[no-any-return]
     except KeyboardInterrupt:
+        return EXIT_OK
+    except BrokenPipeError:  # `afa decode gps FILE | head`: the reader has had enough
+        _silence_stdout()
         return EXIT_OK
     except ConfigError as exc:
         print(str(exc), file=sys.stderr)
@@ -44,12 +51,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_FAILURE
 
 
-def _parser() -> argparse.ArgumentParser:
+def _silence_stdout() -> None:
+    """Point standard output at /dev/null, so that Python's own flush at exit does not
+    complain about the closed pipe once more."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # no real file behind stdout
+        pass
+
+
+def _parser(prog: str = "afa") -> argparse.ArgumentParser:
+    from afa import __version__
+
     parser = argparse.ArgumentParser(
-        prog="python -m afa",
+        prog=prog,
         description="afa: the Architecture for Autonomy (DRDC Raptor UGV) on asyncio.")
-    parser.add_argument("--log-level", default="warning",
-                        choices=["debug", "info", "warning", "error"], help="logging level")
+    parser.add_argument("--version", action="version", version=f"afa {__version__}")
+    parser.add_argument("--log-level", default="warning", choices=LOG_LEVELS,
+                        help="logging level (default warning; also after the command)")
     commands = parser.add_subparsers(required=True, metavar="COMMAND")
 
     run = commands.add_parser("run", help="run the components a configuration file enables")
@@ -125,7 +147,19 @@ def _parser() -> argparse.ArgumentParser:
     from afa.tools.cli import add_parsers as add_tool_parsers
 
     add_tool_parsers(commands)
+    _log_level_everywhere(parser)
     return parser
+
+
+def _log_level_everywhere(parser: argparse.ArgumentParser) -> None:
+    """Accept ``--log-level`` after any command too (``afa run X --log-level info``); given
+    there, it overrides the one before the command."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for command in action.choices.values():
+                command.add_argument("--log-level", default=argparse.SUPPRESS,
+                                     choices=LOG_LEVELS, help="logging level (default warning)")
+                _log_level_everywhere(command)
 
 
 def _log_parsers(commands: Any) -> None:
@@ -198,14 +232,25 @@ def _catalog(path: Path) -> Any:
 
 
 def _config_check(args: argparse.Namespace) -> int:
+    from afa.system import System
+
     config = _load(args.config)
-    warnings = _catalog(args.config).problems()
+    system = System.from_xml(args.config, real_devices=False)
+    warnings = [f"{args.config}: warning: {line}" for line in system.catalog().problems()]
+    lines = dict(zip((entry.Name for entry in config.launcher.Components),
+                     config.launcher_lines, strict=False))
+    for device, users in system.port_conflicts().items():
+        first = min(lines.get(name, 0) for name, _ in users)
+        named = ", ".join(f"{name} at {baud}" for name, baud in users)
+        warnings.append(f"{args.config}:{first}: warning: serial port {device} is named by "
+                        f"components at different baud rates ({named}): one connection "
+                        "cannot serve both; give each device its own port")
     for line in warnings:
-        print(f"{args.config}: warning: {line}", file=sys.stderr)
+        print(line, file=sys.stderr)
     count = sum(len(sets) for sets in config.sections.values())
     print(f"{args.config}: valid ({len(config.sections)} sections, {count} parameter sets, "
           f"robot {config.robot!r}, {len(config.launcher.Components)} launcher entries"
-          f"{f', {len(warnings)} wiring warning(s)' if warnings else ''})")
+          f"{f', {len(warnings)} warning(s)' if warnings else ''})")
     return EXIT_OK
 
 
@@ -237,8 +282,16 @@ def _config_defaults(args: argparse.Namespace) -> int:
     text = defaults_document()
     if args.output is None:
         sys.stdout.write(text)
-    else:
+        return EXIT_OK
+    try:
         args.output.write_text(text)
+    except OSError as exc:
+        print(f"afa config defaults: cannot write {args.output}: {exc.strerror or exc}",
+              file=sys.stderr)
+        return EXIT_INVALID
+    print(f"{args.output}: every component type with its defaults; run it with "
+          f"`afa run {args.output} --sim` (`afa config check {args.output}` for what to "
+          "change before a vehicle)", file=sys.stderr)
     return EXIT_OK
 
 
@@ -274,18 +327,42 @@ def _decode(args: argparse.Namespace) -> int:
             inner = getattr(message, "message", None)  # framed links wrap the message
             kind = type(inner if dataclasses.is_dataclass(inner) else message).__name__
             record = {"type": kind, **_jsonable(dataclasses.asdict(message))}
-            print(json.dumps(record))
+            print(json.dumps(record, allow_nan=False))
     stats = decoder.stats
     print(json.dumps({"statistics": {"messages": messages, "checksum_failures":
                                      stats.checksum_failures, "malformed": stats.malformed,
                                      "bytes_skipped": stats.bytes_skipped + decoder.buffered,
                                      "bytes": len(data)}}))
+    if messages == 0:
+        sys.stdout.flush()
+        print(f"afa decode: nothing decoded from {args.file} as {args.device} "
+              f"({len(data)} bytes{_other_decoders(args.device, data)})", file=sys.stderr)
+        return EXIT_FAILURE
     return EXIT_OK
+
+
+def _other_decoders(device: str, data: bytes) -> str:
+    """What the other decoders make of (the first 64 KiB of) ``data``, for a hint."""
+    from afa import registry
+
+    if not data:
+        return ": the input is empty"
+    sample, found = data[:65536], []
+    for name in registry.decoders():
+        if name != device:
+            count = len(registry.load_decoder(name)().feed(sample))
+            if count:
+                found.append((count, name))
+    if not found:
+        return "; no other decoder finds anything in it either"
+    count, name = max(found)
+    return f"; is it a {name} capture? the {name} decoder finds {count} message(s) in it"
 
 
 def _jsonable(value: Any) -> Any:
     import datetime
     import enum
+    import math
 
     import numpy as np
 
@@ -296,7 +373,9 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):
-        return value.item()
+        return _jsonable(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None  # JSON has no NaN or infinity: a missing value
     if isinstance(value, enum.Enum):
         return value.value if isinstance(value.value, (str, int, float)) else value.name
     if isinstance(value, bytes):
@@ -376,14 +455,48 @@ def run_clock(fast: bool = False, realtime_factor: float | None = None) -> Any:
 
 async def _run_system(args: argparse.Namespace) -> int:
     from afa.clock import Clock
+
+    clock: Clock = run_clock(args.fast, args.realtime_factor)
+    from afa.bridge.runner import lockstep_clock
+
+    clock = lockstep_clock(args) or clock  # a process group in lock-step (decision 0011)
+    with _log_times(clock):
+        return await _run_on(args, clock)
+
+
+@contextmanager
+def _log_times(clock: Any) -> Iterator[None]:
+    """In virtual time (``--fast``, ``--realtime-factor``), stamp log lines with the clock's
+    seconds since the run began (``t=  12.345``) instead of wall-clock dates; the root
+    handlers' formatters are restored afterwards."""
+    from afa.clock import VirtualClock
+
+    handlers = logging.getLogger().handlers
+    if not isinstance(clock, VirtualClock) or not handlers:
+        yield
+        return
+    start = clock.monotonic()
+
+    class ClockFormatter(logging.Formatter):
+        def formatTime(self, record: logging.LogRecord, datefmt: str | None = None) -> str:
+            return f"t={clock.monotonic() - start:9.3f}"
+
+    saved = [handler.formatter for handler in handlers]
+    for handler in handlers:
+        handler.setFormatter(ClockFormatter(LOG_FORMAT))
+    try:
+        yield
+    finally:
+        for handler, formatter in zip(handlers, saved, strict=True):
+            handler.setFormatter(formatter)
+
+
+async def _run_on(args: argparse.Namespace, clock: Any) -> int:
+    from afa.bridge.runner import summary as bridge_summary
+    from afa.bridge.runner import system_options
     from afa.errors import StartupError, TaskFailed
     from afa.system import System
 
-    clock: Clock = run_clock(args.fast, args.realtime_factor)
-    from afa.bridge.runner import lockstep_clock, system_options
-    from afa.bridge.runner import summary as bridge_summary
-
-    clock = lockstep_clock(args) or clock  # a process group in lock-step (decision 0011)
     simulation = None
     options: dict[str, Any] = {"strict": args.strict, "clock": clock, **system_options(args)}
     if args.sim:
@@ -391,6 +504,8 @@ async def _run_system(args: argparse.Namespace) -> int:
         world = _world_path(args.world) if args.world else simulation_cls.default_world()
         simulation = simulation_cls(world, clock, seed=args.seed, expose=args.expose,
                                     teleop=args.teleop)
+        if args.expose:
+            simulation.announce = _print_endpoint
         options["devices"] = simulation.device_for
     system = System.from_xml(args.config, **options)
     if simulation is not None and args.process and not simulation.fakes:
@@ -414,8 +529,9 @@ async def _run_system(args: argparse.Namespace) -> int:
     clock_start = clock.monotonic()
     try:
         async with _serving(console), system:
-            for note in system.notes:
-                print(f"afa: {note}", file=sys.stderr)
+            if not logging.getLogger("afa.system").isEnabledFor(logging.WARNING):
+                for note in system.notes:  # logged as warnings, unless those are hidden
+                    print(f"afa: {note}", file=sys.stderr)
             duration, finished = args.duration, None
             if simulation is not None and duration is None:
                 # a simulated run ends with its mission (or drive script), or at its limit
@@ -454,9 +570,17 @@ async def _run_system(args: argparse.Namespace) -> int:
                 for name, info in summary["components"].items()
                 if not info["ever_healthy"] and not info["waiting"]]
         hint = ""
-        if not args.sim and any("cannot open device" in info["detail"]
-                                for info in summary["components"].values()):
-            hint = " No devices found; did you mean --sim?"
+        if not args.sim:
+            from afa.component import PublishServerReactor
+
+            drivers = [summary["components"][name] for name, component
+                       in system.components.items()
+                       if isinstance(component, PublishServerReactor)
+                       and name in summary["components"]]
+            if any("cannot open device" in info["detail"] for info in drivers):
+                hint = " No devices found; did you mean --sim?"
+            elif drivers and not any(info["ever_healthy"] for info in drivers):
+                hint = " No device answered; did you mean --sim?"
         print(f"afa run: the stack never came up: {'; '.join(down)}.{hint}", file=sys.stderr)
         return EXIT_FAILURE
     if (simulation is not None and args.duration is None and not stop.is_set()
@@ -466,6 +590,12 @@ async def _run_system(args: argparse.Namespace) -> int:
               f"{summary['sim_time_s']:.0f} s).", file=sys.stderr)
         return EXIT_FAILURE
     return EXIT_OK
+
+
+def _print_endpoint(component: str, endpoint: str) -> None:
+    """``--expose``: where each emulated device is served (a pseudo-terminal a serial
+    tool can open, or a loopback TCP port)."""
+    print(f"afa: {component} emulated on {endpoint}", file=sys.stderr, flush=True)
 
 
 def _console(args: argparse.Namespace, system: Any, simulation: Any) -> Any:
@@ -578,6 +708,7 @@ def _maps_line(maps: dict[str, Any]) -> str:
 
 def _print_summary(summary: dict[str, Any]) -> None:
     events = sum(summary["events"].values())
+    unhealthy = sum(not info["healthy"] for info in summary["components"].values())
     if "world" in summary:
         pose = summary.get("pose_error") or {}
         print(f"world {summary['world']}: {summary['distance_m']:.1f} m driven, "
@@ -598,7 +729,8 @@ def _print_summary(summary: dict[str, Any]) -> None:
         print(_maps_line(summary["maps"]))
     print(f"ran {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s wall; "
           f"{events} events, {summary['events_dropped']} dropped; "
-          f"{len(summary['component_errors'])} component(s) with errors")
+          f"{len(summary['component_errors'])} component(s) with errors"
+          + (f", {unhealthy} of {len(summary['components'])} unhealthy" if unhealthy else ""))
     for name, info in summary["components"].items():
         flag = "ok" if info["healthy"] else f"UNHEALTHY {info['detail']}".strip()
         if not info["ever_healthy"]:

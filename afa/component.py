@@ -187,7 +187,7 @@ class Component(Generic[P]):
         self.parameters: P = parameters  # type: ignore[assignment]
         self.type_name = type(self).__name__
         self.state = State.CREATED
-        self.log = logging.getLogger(f"afa.component.{name}")
+        self.log = _component_logger(name)
         self.restarts = 0
         self.failures = 0
         self.last_error: BaseException | None = None
@@ -383,6 +383,12 @@ class Component(Generic[P]):
         """Called after setup with the ports open (the PSR base starts its reactor)."""
 
     async def _deliver(self, port: Input) -> None:
+        """Deliver ``port``'s events to its handler until the component's life ends.
+
+        However else delivery ends (a handler that raises CancelledError, cancels its own
+        task or raises a BaseException that is not an Exception, a subscription that
+        closes under it), the component fails: a subscription never dies silently while
+        its component looks RUNNING and healthy."""
         subscription = port.subscription
         assert subscription is not None
         handler = port.handler
@@ -398,11 +404,21 @@ class Component(Generic[P]):
                 if result is not None:
                     await result
             except asyncio.CancelledError:
-                task = asyncio.current_task()
-                if task is not None and task.cancelling():
-                    raise  # the component is stopping
+                if self._stopping():
+                    raise  # the component is stopping (or a sibling task failed)
                 raise ComponentError(f"{self.name}: the handler of {port.name!r} raised "
                                      "CancelledError without being cancelled") from None
+            except BaseException as exc:
+                if isinstance(exc, (Exception, KeyboardInterrupt, SystemExit)):
+                    raise  # an Exception fails the component as it is; an exit exits
+                raise ComponentError(f"{self.name}: the handler of {port.name!r} raised "
+                                     f"{type(exc).__name__}: {exc}") from exc
+        if not self._stopping():
+            raise ComponentError(f"{self.name}: the subscription to {port.name!r} ended")
+
+    def _stopping(self) -> bool:
+        """Whether this component's current life is ending (its scope is closing)."""
+        return self._scope is None or self._scope.closing
 
     async def _release(self) -> None:
         for port in self._inputs:
@@ -424,6 +440,30 @@ class Component(Generic[P]):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} {self.state.value}>"
+
+
+class _NamesItsComponent(logging.Filter):
+    """Puts the component's name at the front of a message that does not name it, so a
+    warning printed without a formatter (Python's last-resort handler in a notebook shows
+    only the message) still says which component it is about."""
+
+    def __init__(self, component: str) -> None:
+        super().__init__()
+        self.component = component
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if self.component not in message:
+            record.msg, record.args = f"{self.component}: {message}", None
+        return True
+
+
+def _component_logger(name: str) -> logging.Logger:
+    """``afa.component.NAME``, whose messages name the component."""
+    logger = logging.getLogger(f"afa.component.{name}")
+    if not any(isinstance(f, _NamesItsComponent) for f in logger.filters):
+        logger.addFilter(_NamesItsComponent(name))
+    return logger
 
 
 def _unattached_proxy(interface: type[InterfaceT], name: str) -> InterfaceT:

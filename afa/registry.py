@@ -55,9 +55,29 @@ def _group(group: str) -> dict[str, EntryPoint]:
 
 
 def suggest(word: str, choices: Any) -> str:
-    """`` (did you mean 'X'?)`` for the closest of ``choices``, or ``""``."""
+    """`` (did you mean 'X'?)`` for the closest of ``choices``, or ``""``.
+
+    A candidate that resembles ``word`` only through a shared prefix or suffix
+    (``ImuConfig`` and ``MapConfig`` share ``Config``) is not suggested: what differs
+    between them must still look like a typo (a character or two, or mostly alike)."""
     close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
+    if not close or not _typo_of(word, close[0]):
+        return ""
+    return f" (did you mean {close[0]!r}?)"
+
+
+def _typo_of(word: str, candidate: str) -> bool:
+    a, b = word.lower(), candidate.lower()
+    start = 0
+    while start < min(len(a), len(b)) and a[start] == b[start]:
+        start += 1
+    end = 0
+    while end < min(len(a), len(b)) - start and a[-1 - end] == b[-1 - end]:
+        end += 1
+    a, b = a[start:len(a) - end], b[start:len(b) - end]
+    if max(len(a), len(b)) <= 2:
+        return True  # a character or two added, dropped, swapped or changed
+    return difflib.SequenceMatcher(None, a, b).ratio() >= 0.5
 
 
 def _load(ep: EntryPoint, what: str) -> Any:

@@ -45,7 +45,7 @@ from afa.naming import NameRegistry, join_name
 from afa.polling import LocalInvoker, PollLayer, current_caller, proxy_for
 from afa.ports import Catalog, PortInfo
 from afa.tasks import Scope, TaskGroup
-from afa.transport import DeviceFactory, DeviceOpener
+from afa.transport import DeviceFactory, DeviceOpener, SerialSpec
 from idl._base import Interface
 
 __all__ = ["System", "Observer", "Service", "FORBID_REAL_DEVICES"]
@@ -253,6 +253,27 @@ class System:
         of the other processes of a split configuration (``PortInfo.process`` set)."""
         return Catalog([port for c in self.components.values() for port in c.ports()]
                        + self.peer_ports, self.robot)
+
+    def serial_ports(self) -> dict[str, list[tuple[str, int]]]:
+        """``{device: [(component, baud rate), ...]}`` for every serial port a device
+        driver names (available before start; components that share one port share one
+        connection, opened at the rate of the first)."""
+        ports: dict[str, list[tuple[str, int]]] = {}
+        for component in self.components.values():
+            if isinstance(component, PublishServerReactor):
+                try:
+                    spec = component.device()
+                except Exception:  # a driver without a fixed device (a camera's own)
+                    continue
+                if isinstance(spec, SerialSpec):
+                    ports.setdefault(spec.device, []).append((component.name, spec.baudrate))
+        return ports
+
+    def port_conflicts(self) -> dict[str, list[tuple[str, int]]]:
+        """The serial ports that components name at different baud rates: at most one of
+        them can talk to its device (``afa config check`` warns)."""
+        return {device: users for device, users in self.serial_ports().items()
+                if len({baud for _, baud in users}) > 1}
 
     # -- running -------------------------------------------------------------------------
     async def __aenter__(self) -> System:

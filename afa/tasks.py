@@ -152,12 +152,16 @@ class Scope:
         self._group = asyncio.TaskGroup()
         self._meter = meter
         self._account = account
+        #: True once the block's body has ended (returned, raised or was cancelled):
+        #: a task cancelled from then on is being stopped, not ending by its own hand
+        self.closing = False
 
     async def __aenter__(self) -> Scope:
         await self._group.__aenter__()
         return self
 
     async def __aexit__(self, *exc_info: Any) -> None:
+        self.closing = True
         await self._group.__aexit__(*exc_info)
 
     def spawn(self, coroutine: Coroutine[Any, Any, T], name: str) -> asyncio.Task[T]:

@@ -378,6 +378,7 @@ class DeviceOpener:
         self.allow_real = allow_real
         self.clock = clock
         self._shared: dict[str, _SharedPort] = {}
+        self._rates: dict[str, int] = {}  # the baud rate each shared port was opened at
 
     async def open(self, component: str, spec: Any) -> Any:
         """Open ``component``'s device: its override if one is installed, else the real
@@ -404,4 +405,9 @@ class DeviceOpener:
         if port is None:
             port = self._shared[spec.device] = _SharedPort(
                 lambda: open_serial(spec.device, spec.baudrate, clock=self.clock), spec.device)
+            self._rates[spec.device] = spec.baudrate
+        elif self._rates.get(spec.device, spec.baudrate) != spec.baudrate:
+            raise EDevIO(f"serial port {spec.device} is shared with another component at "
+                         f"{self._rates[spec.device]} baud; this one asks for {spec.baudrate} "
+                         "(give each device its own port)")
         return await port.open()

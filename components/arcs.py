@@ -55,7 +55,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Annotated, Any
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -186,6 +186,8 @@ def arc_point(s: float, curvature: float, offset: float = 0.0) -> tuple[float, f
 class ArcSetParameters(Parameters):
     """The candidate arcs shared by the voting behaviours and the Arc Arbiter (afa
     addition: the seed's set is "pre-defined" but not printed)."""
+
+    section_name: ClassVar[str] = "CandidateArcs"  # ARC_SET_SECTION
 
     Count: Annotated[int, Field(ge=3)] = param(
         27, unit="1",

@@ -314,6 +314,9 @@ class RaptorSimulation:
         self._digests: dict[str, Any] = {}  # per event name: one stream's digest
         self.fakes: list[Any] = []
         self.endpoints: dict[str, str] = {}  # component -> pty path or host:port
+        #: told ``(component, endpoint)`` as each exposed device is served (``afa run
+        #: --expose`` prints them); None logs them at info level
+        self.announce: Callable[[str, str], None] | None = None
         self._shared: dict[str, Any] = {}
         self._mounts: dict[str, np.ndarray] = {}
         self._system: System | None = None
@@ -367,6 +370,13 @@ class RaptorSimulation:
         self._system = system
         self._observer = system.observe(self._observe, name="simulation", maxsize=1 << 16)
 
+    def _announce(self, name: str, endpoint: str) -> None:
+        self.endpoints[name] = endpoint
+        if self.announce is not None:
+            self.announce(name, endpoint)
+        else:
+            log.info("%s: emulated on %s", name, endpoint)
+
     def _exposed(self, name: str, fake: Any, kind: str) -> DeviceFactory:
         """A factory serving ``fake`` on a pseudo-terminal (one per emulated device, so
         the MPC555's two components share it) or a loopback TCP port, opened through
@@ -378,8 +388,7 @@ class RaptorSimulation:
                     pty = self._shared[f"pty:{id(fake)}"] = PtyDeviceStream(self.clock)
                     spawn(fake.serve(pty), owner=f"emulator {name}")
                 if name not in self.endpoints:
-                    self.endpoints[name] = pty.path
-                    log.warning("%s: emulated on %s", name, pty.path)
+                    self._announce(name, pty.path)
                 assert self._system is not None
                 return await self._system.devices.open_serial(SerialSpec(pty.path,
                                                                          spec.baudrate))
@@ -395,8 +404,7 @@ class RaptorSimulation:
                 server = await asyncio.start_server(handle, "127.0.0.1", 0)
                 self._shared[f"server:{name}"] = server
                 port = self._shared[f"tcp:{name}"] = server.sockets[0].getsockname()[1]
-                self.endpoints[name] = f"127.0.0.1:{port}"
-                log.warning("%s: emulated on 127.0.0.1:%d", name, port)
+                self._announce(name, f"127.0.0.1:{port}")
             return await open_tcp("127.0.0.1", port, clock=self.clock)
         return open_socket  # type: ignore[return-value]
 

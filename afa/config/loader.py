@@ -10,7 +10,6 @@ references. Every problem is collected and reported at once, one line each::
 
 from __future__ import annotations
 
-import difflib
 import json
 import re
 from dataclasses import dataclass
@@ -177,8 +176,9 @@ def _where(section: str, instance: str) -> str:
 
 
 def _suggest(word: str, choices: Any) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
+    from afa.registry import suggest
+
+    return suggest(word, choices)
 
 
 def _explain(exc: ValidationError, path: Path, where: str, pset: ParameterSet,

@@ -26,6 +26,7 @@ configuration, a limit on the number of elements, which bounds the validation wo
 from __future__ import annotations
 
 import os
+import re
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -99,6 +100,64 @@ def read_bounded(path: Path, limit: int) -> bytes:
     return data
 
 
+_MISMATCH = re.compile(r"Opening and ending tag mismatch: (\S+) line (\d+) and (\S+?)"
+                       r"(?:, line \d+, column \d+)?$")
+_QUOTE_SCAN = 40  # lines searched back for an attribute value's opening quote
+_INDENT_SCAN = 400  # lines searched for an element left open (quadratic in it at worst)
+
+
+def _syntax_cause(exc: etree.XMLSyntaxError, data: bytes) -> tuple[int, str]:
+    """The line that caused a syntax error, and the message to print there.
+
+    The parser notices most mistakes later than they were made: an element left open
+    (``/>`` written ``>``) at the end tag of its parent, a missing closing quote on the
+    next line. Those are reported where they began."""
+    where = exc.lineno or 1
+    message = re.sub(r", line \d+, column \d+$", "", exc.msg or "")
+    mismatch = _MISMATCH.match(exc.msg or "")
+    if mismatch is not None:
+        opened, line, closer = mismatch.group(1), int(mismatch.group(2)), mismatch.group(3)
+        line = _left_open(data, opened, line, where)
+        return line, (f"<{opened}> opened here is not closed where expected (</{closer}> "
+                      f"at line {where} closes something else; is a '/>' missing here, or "
+                      "an end tag extra?)")
+    if "attributes values" in message or message.startswith("AttValue"):
+        lines = data.split(b"\n")
+        for number in range(min(where, len(lines)), max(0, where - _QUOTE_SCAN), -1):
+            if lines[number - 1].count(b'"') % 2:  # (an apostrophe in a comment is no quote)
+                if number != where:
+                    return number, (f"an attribute value opened here is not closed "
+                                    f"({message} at line {where})")
+                break
+    return where, message
+
+
+def _left_open(data: bytes, tag: str, first: int, last: int) -> int:
+    """Which ``<tag>`` between lines ``first`` and ``last`` was left open, judged by
+    indentation: the first start tag (not ``/>``) whose next line at its own indentation
+    or less is not its end tag. The parser only knows that the one at ``first`` did not
+    end where expected (an inner one left open took its end tag); ``first`` if the
+    indentation does not tell."""
+    if last - first > _INDENT_SCAN:
+        return first  # bounded work on any file: a long stretch is not guessed at
+    lines = data.decode("utf-8", "replace").split("\n")
+    start = re.compile(rf"^(\s*)<{re.escape(tag)}\b[^<]*(?<!/)>\s*$")
+
+    def indent(text: str) -> int:
+        return len(text) - len(text.lstrip())
+
+    for number in range(first, min(last, len(lines) + 1)):
+        opened = start.match(lines[number - 1])
+        if opened is None:
+            continue
+        for later in lines[number:last]:
+            if later.strip() and indent(later) <= len(opened.group(1)):
+                if not later.lstrip().startswith(f"</{tag}"):
+                    return number
+                break
+    return first
+
+
 def parse_xml(data: bytes, path: Path) -> etree._Element:
     """Parse XML hardened against hostile files: no DTD loading, no entity resolution,
     no network, no internal DTD subset (so no entity expansion), no entity references.
@@ -112,7 +171,8 @@ def parse_xml(data: bytes, path: Path) -> etree._Element:
     try:
         root = etree.fromstring(data, parser=parser)
     except etree.XMLSyntaxError as exc:
-        raise ConfigError(f"{path}:{exc.lineno or 1}: XML syntax error: {exc.msg}") from None
+        line, message = _syntax_cause(exc, data)
+        raise ConfigError(f"{path}:{line}: XML syntax error: {message}") from None
     if root.getroottree().docinfo.internalDTD is not None:
         raise ConfigError(f"{path}:1: a DTD internal subset is not allowed (entities and "
                           "entity expansion are refused)")

@@ -41,6 +41,9 @@ class Parameters(BaseModel):
 
     namespace: ClassVar[str] = "Raptor"
     miro_type: ClassVar[str] = ""
+    #: The section a model is conventionally read from, when it is not named after the
+    #: model (a section several components share); ``config defaults`` writes it so.
+    section_name: ClassVar[str] = ""
 
     @classmethod
     def __pydantic_init_subclass__(cls, **kwargs: Any) -> None:

@@ -41,6 +41,8 @@ __all__ = ["ModelServer", "VEHICLE_FRAME", "ANTENNA_FRAME", "IMU_FRAME"]
 VEHICLE_FRAME = "Raptor:RearAxleCenter"
 ANTENNA_FRAME = "GpsAntenna:PhaseCenter"
 IMU_FRAME = "Imu:SensorCenter"
+#: The Raptor's geometry model that afa ships (the default ModelFileName names it).
+SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "configs" / "050917raptor01.XML"
 
 
 #: Table A.8's IDL-type names, as the Subscriptions list spells them, and their types.
@@ -84,6 +86,13 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
         path = Path(p.ModelFileName)
         if not path.is_absolute():
             path = self.context.base_dir / path
+            default = ModelServerParameters.model_fields["ModelFileName"].default
+            if not path.exists() and p.ModelFileName == default and SHIPPED_MODEL.exists():
+                # the default names the Raptor's geometry, which afa ships (a file from
+                # `afa config defaults` need not sit beside a copy of it)
+                self.log.info("no %s beside the configuration: using the shipped %s",
+                              p.ModelFileName, SHIPPED_MODEL)
+                path = SHIPPED_MODEL
         self.model = GeometryModel.load(path)
         antenna = self.model.transformation(VEHICLE_FRAME, ANTENNA_FRAME)[:3, 3]
         self._imu_rotation = self.model.transformation(VEHICLE_FRAME, IMU_FRAME)[:3, :3]

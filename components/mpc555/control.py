@@ -27,6 +27,7 @@ A Publish Server and Reactor sharing the serial port with Wheel Odometry
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -358,14 +359,18 @@ class VehicleControl(Mpc555Host[VehicleControlParameters]):
                 await self.clock.sleep_until(last + interval)
                 continue
             self.control_counters["watchdog_stops"] += 1
+            # at rest as commanded (the end of a drive or a mission), the stop is routine;
+            # commands that stop while the vehicle was told to move are a fault upstream
+            routine = self._target.translation == 0.0
             self._stopped()
             detail = (f"command watchdog: no velocity command for {interval:g} s, "
-                      f"vehicle stopped at t={self.clock.now():.3f}")
+                      "vehicle stopped" + (" (it was at rest)" if routine else ""))
             try:
                 await self.command(StopVehicle())
             except EDevIO as exc:
                 detail += f" (STOP_VEHICLE failed: {exc})"
-            self.log.warning("%s", detail)
+                routine = False
+            self.log.log(logging.INFO if routine else logging.WARNING, "%s", detail)
             self._note(detail)
 
     # -- VehicleControl interface (Table 26) ---------------------------------------------

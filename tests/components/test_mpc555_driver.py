@@ -334,6 +334,30 @@ async def test_host_command_watchdog_puts_a_stop_on_the_wire():
     assert "command watchdog" in health.detail
 
 
+@pytest.mark.parametrize("last_speed, level", [(1.5, "WARNING"), (0.0, "INFO")])
+async def test_the_watchdog_stop_is_a_warning_only_when_the_vehicle_was_told_to_move(
+        caplog, last_speed, level):
+    """At the end of every scripted drive the last command is 'stand still' and the
+    watchdog's stop is routine (info); commands that stop while the vehicle was told to
+    move are worth a warning."""
+    clock = VirtualClock(start=0.0)
+    fake = FakeMpc555(clock)
+    vc = VehicleControl("VC")
+    caplog.set_level("INFO", logger="afa.component.VC")
+    async with running([vc], {"VC": fake}, clock) as system:
+        control = await _started(system, vc, clock)
+        await control.setVelocity(VelocityIDL(translation=1.0))
+        await clock.advance(0.2)
+        await control.setVelocity(VelocityIDL(translation=last_speed))
+        await clock.advance(1.0)
+        stats = vc.statistics()
+    assert stats["watchdog_stops"] == 1
+    records = [r for r in caplog.records
+               if r.getMessage().removeprefix("VC: ").startswith("command watchdog")]
+    assert [r.levelname for r in records] == [level]
+    assert "t=" not in records[0].getMessage()  # no absolute clock stamp in the message
+
+
 async def test_a_nak_or_a_missing_ack_is_edevio():
     clock = VirtualClock(start=0.0)
     fake = FakeMpc555(clock)

@@ -463,6 +463,8 @@ DEVIATIONS = {
     ("ObsAvoid", "VehicleRadius"): "0.7",
     # Table A.11's 1 m corridor misses an obstacle before a 1.4 m wide vehicle's wheel
     ("ObstacleDetection", "VehicleWidth"): "1.4",
+    # Tables A.3 and A.4 put the IMU (38400 baud) and the GPS (57600) on one port
+    ("GpsSokkiaConfig", "Device"): "/dev/ttyUSB1",
 }
 
 

@@ -1,6 +1,7 @@
 """``python -m afa config ...``: check, show, defaults, and one-line errors for bad files."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -37,7 +38,9 @@ def test_show_json_holds_every_annex_a_parameter_with_the_seed_value(capsys):
         for name, _seed_text, expected in rows:
             assert name in values, f"{table} {name} missing from config show"
             if (section, name) in DEVIATIONS:  # documented departures from the seed
-                assert values[name] == float(DEVIATIONS[section, name]), f"{table} {name}"
+                deviation = DEVIATIONS[section, name]
+                expected_value = deviation if isinstance(values[name], str) else float(deviation)
+                assert values[name] == expected_value, f"{table} {name}"
             elif expected is not NA:
                 assert values[name] == expected, f"{table} {name}: {values[name]!r}"
     assert shown["Robot"]["default"]["Name"] == "Raptor"
@@ -56,6 +59,41 @@ def test_defaults_writes_a_file_that_validates(tmp_path, capsys):
     config = load_configuration(target)
     assert config.parameters("NodLaser").Motorrates == 15.0
     assert config.parameters("ArcArbiter").StaleVoteTimeUSec == 500000
+    assert config.parameters("CandidateArcs").Count == 27  # the shared section's name
+
+
+def test_defaults_launch_every_component_type_and_the_file_runs(tmp_path, capsys):
+    """A newcomer's `config defaults -o FILE` then `afa run FILE --sim` starts the stack
+    (it used to write no Launcher entries, so running it started nothing)."""
+    import os
+
+    from afa import System, registry
+
+    target = tmp_path / "defaults.xml"
+    code, _, err = run_cli(capsys, "config", "defaults", "-o", str(target))
+    assert code == 0 and "--sim" in err
+    config = load_configuration(target)
+    types = [entry.Type for entry in config.launcher.Components]
+    implemented = [t for t in registry.component_types()
+                   if registry.is_implemented(registry.load_component(t))]
+    assert sorted(types) == sorted(implemented)
+    assert types.index("NodLaser") < types.index("ModelServer") < types.index("ArcArbiter")
+    enabled = {entry.Type for entry in config.launcher.Components if entry.Enabled}
+    assert "LogNotify" not in enabled  # it would write a recording
+    assert set(System.from_xml(target, real_devices=False).components) == enabled
+    summary = tmp_path / "summary.json"
+    result = subprocess.run(  # from a directory with no geometry file beside the config
+        [sys.executable, "-m", "afa", "run", str(target), "--sim", "--fast", "--duration", "10",
+         "--summary", str(summary)], capture_output=True, text=True, timeout=120,
+        cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert result.returncode == 0, result.stderr
+    data = json.loads(summary.read_text())
+    assert data["stack_up"] and data["distance_m"] > 1.0  # the autonomous stack drove
+
+
+def test_defaults_into_a_missing_directory_is_a_clean_error(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "config", "defaults", "-o", str(tmp_path / "no" / "d.xml"))
+    assert code == 2 and "cannot write" in err and "Traceback" not in err
 
 
 def mutate(tmp_path, old, new, count=1):
@@ -95,7 +133,7 @@ def test_bad_files_give_exit_2_and_file_line_messages(case, tmp_path, capsys):
     assert len(messages) == 1, messages
     assert messages[0].startswith(f"{path}:")
     assert expected in messages[0]
-    if case not in ("syntax error", "missing instance"):
+    if case != "missing instance":  # (that one is reported at its Launcher entry)
         assert messages[0].startswith(f"{path}:{line}:"), (messages[0], line)
 
 
@@ -193,3 +231,86 @@ def test_unimplemented_components_are_reported_and_strict_refuses_them(tmp_path)
             System.from_xml(config, strict=True)
     finally:
         registry._registered.pop("FutureThing", None)
+
+
+@pytest.mark.parametrize("wrong, hint", [("GPSSokkia", "did you mean 'GpsSokkia'?"),
+                                         ("Foo", "installed types:")])
+def test_check_refuses_an_unknown_component_type_at_its_line(tmp_path, capsys, wrong, hint):
+    """Issue 16, defect 2: `config check`, not only `run`, refuses a Launcher Type that
+    no installed component has, with file:line: and a suggestion."""
+    path, _ = mutate(tmp_path, '<parameter name="Type" value="GpsSokkia"/>',
+                     f'<parameter name="Type" value="{wrong}"/>')
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1)
+                if f'value="{wrong}"' in text)
+    code, out, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2 and "valid" not in out
+    assert err.startswith(f"{path}:{line}: Launcher/Components[")
+    assert f"unknown component type '{wrong}'" in err and hint in err
+
+
+def test_check_warns_when_two_devices_share_a_port_at_different_rates(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "config", "check", str(RAPTOR))
+    assert code == 0 and "serial port" not in err  # the shipped file: one port each
+    path, _ = mutate(tmp_path, '<parameter name="Device" value="/dev/ttyUSB1"/>',
+                     '<parameter name="Device" value="/dev/ttyUSB0"/>')
+    code, out, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 0 and "1 warning(s)" in out
+    assert re.search(rf"^{re.escape(str(path))}:\d+: warning: serial port /dev/ttyUSB0 ", err,
+                     re.M), err
+    assert "3dmgService at 38400" in err and "GpsSokkiaService at 57600" in err
+    # the MPC555's two components share /dev/ttyS0 at one rate: that is no conflict
+    assert "/dev/ttyS0" not in err
+
+
+async def test_a_shared_serial_port_refuses_a_second_baud_rate():
+    """At run time the second component on a port opened at another rate gets EDevIO
+    (and stays unhealthy) instead of silently talking at the first one's rate."""
+    from afa.errors import EDevIO
+    from afa.transport import DeviceOpener, PtyDeviceStream, SerialSpec
+
+    device = PtyDeviceStream()
+    opener = DeviceOpener()
+    try:
+        first = await opener.open("Imu", SerialSpec(device.path, 38400))
+        same = await opener.open("Imu2", SerialSpec(device.path, 38400))
+        with pytest.raises(EDevIO, match="shared with another component at 38400 baud"):
+            await opener.open("Gps", SerialSpec(device.path, 57600))
+        await first.close()
+        await same.close()
+    finally:
+        await device.close()
+
+
+@pytest.mark.parametrize("old, new", [
+    ('<parameter name="EventName" value="Imu"/>', '<parameter name="EventName" value="Imu/>'),
+    ('<parameter name="EventName" value="Imu"/>', '<parameter name="EventName" value=Imu/>'),
+    ('<parameter name="Device" value="/dev/ttyUSB0"/>',
+     '<parameter name="Device" value="/dev/ttyUSB0">'),
+], ids=["unclosed quote", "unquoted value", "element left open"])
+def test_an_xml_syntax_error_is_reported_at_the_line_that_caused_it(old, new, tmp_path,
+                                                                    capsys):
+    """Not at the end tag or the next line, where the parser noticed it."""
+    path, line = mutate(tmp_path, old, new)
+    code, _, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2
+    assert err.startswith(f"{path}:{line}: XML syntax error: "), (err, line)
+
+
+@pytest.mark.parametrize("section", ["ImuConfig", "StereoConfig", "GpsSokkiaConfig"])
+def test_a_deleted_section_suggests_no_unrelated_one(section, tmp_path, capsys):
+    text = RAPTOR.read_text()
+    start = text.index(f'<section name="{section}">')
+    end = text.index("</section>", start) + len("</section>")
+    path = tmp_path / "raptor.xml"
+    path.write_text(text[:start] + text[end:])
+    code, _, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2
+    assert f"section {section!r} is missing" in err
+    assert "did you mean" not in err, err
+
+
+def test_a_misspelt_section_is_still_suggested(tmp_path, capsys):
+    path, _ = mutate(tmp_path, '<parameter name="Section" value="ImuConfig"/>',
+                     '<parameter name="Section" value="ImuConfg"/>')
+    code, _, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2 and "did you mean 'ImuConfig'?" in err

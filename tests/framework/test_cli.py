@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -63,10 +64,12 @@ def test_real_device_mode_with_no_devices_says_the_stack_never_came_up(tmp_path)
         [sys.executable, "-m", "afa", "run", str(config), "--duration", "1", "--summary",
          str(summary)], capture_output=True, text=True, timeout=120, cwd=tmp_path,
         # every device this file names is absent or refused: real-device mode, safely
-        env={k: v for k, v in os.environ.items() if k != "AFA_FORBID_REAL_DEVICES"})
+        env={**{k: v for k, v in os.environ.items() if k != "AFA_FORBID_REAL_DEVICES"},
+             "PYTHONPATH": str(ROOT)})  # this checkout's afa, wherever afa is installed
     assert result.returncode == 1, result.stderr
     assert "the stack never came up" in result.stderr
     assert "No devices found; did you mean --sim?" in result.stderr
+    assert re.search(r"0 component\(s\) with errors, 1[0-9] of 16 unhealthy", result.stdout)
     assert "Traceback" not in result.stderr
     data = json.loads(summary.read_text())
     components = data["components"]
@@ -101,3 +104,177 @@ def test_an_unknown_world_name_is_explained(capsys):
     assert main(["run", str(RAPTOR), "--sim", "--fast", "--world", "rock-feild"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'rock-field'" in err and "shipped worlds:" in err
+
+
+def test_version_and_the_scripts_own_name_in_its_usage(capsys):
+    import pytest
+
+    from afa import __version__
+
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"afa {__version__}"
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert capsys.readouterr().out.startswith("usage: afa ")  # the `afa` script
+    with pytest.raises(SystemExit):
+        main(["--help"], prog="python -m afa")
+    assert capsys.readouterr().out.startswith("usage: python -m afa ")
+
+
+def test_log_level_is_accepted_before_and_after_the_command():
+    from afa.cli import _parser
+
+    parser = _parser()
+    assert parser.parse_args(["config", "check", "x.xml"]).log_level == "warning"
+    assert parser.parse_args(["--log-level", "info", "config", "check", "x.xml"]) \
+        .log_level == "info"
+    assert parser.parse_args(["config", "check", "x.xml", "--log-level", "debug"]) \
+        .log_level == "debug"
+    assert parser.parse_args(["run", "x.xml", "--sim", "--log-level", "error"]) \
+        .log_level == "error"
+    assert parser.parse_args(["log", "info", "r.mcap", "--log-level", "info"]) \
+        .log_level == "info"
+
+
+def test_fast_runs_log_virtual_time_and_start_up_notes_appear_once(tmp_path):
+    """Log lines of a --fast run carry the virtual seconds since the run began (not a
+    wall-clock date, nor the virtual clock's 2005 epoch); a start-up note (a component
+    not implemented yet) is printed once, not as a log line and again as 'afa: ...'."""
+    entry = ('<parameter><parameter name="Name" value="futureThing"/>'
+             '<parameter name="Type" value="FutureThing"/></parameter>')
+    text = RAPTOR.read_text().replace(
+        '<parameter name="Components">', '<parameter name="Components">' + entry, 1)
+    config = tmp_path / "raptor.xml"
+    config.write_text(text.replace('value="050917raptor01.XML"',
+                                   f'value="{RAPTOR.parent / "050917raptor01.XML"}"'))
+    script = (
+        "import sys\n"
+        "from afa import registry\n"
+        "from afa.cli import main\n"
+        "from components.arcs import ArcSetParameters\n"
+        "registry.register('FutureThing', registry.not_implemented(\n"
+        "    'FutureThing', ArcSetParameters, 'a capability not written yet'))\n"
+        "sys.exit(main(sys.argv[1:]))\n")
+    result = subprocess.run(
+        [sys.executable, "-c", script, "run", str(config), "--sim", "--fast", "--duration",
+         "1", "--log-level", "info"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count("futureThing (FutureThing) is configured but not "
+                               "implemented yet") == 1, result.stderr
+    logged = [line for line in result.stderr.splitlines() if " INFO " in line]
+    assert logged, result.stderr
+    stamps = [re.match(r"t=\s*(\d+\.\d{3}) INFO ", line) for line in logged]
+    assert all(stamps), logged
+    assert all(0.0 <= float(m.group(1)) <= 5.0 for m in stamps if m)
+    assert "2005" not in result.stderr and "1126" not in result.stderr
+
+
+GPS_CAPTURE = ROOT / "tests" / "data" / "gps" / "swri_binary.bin"
+
+
+def test_decode_into_a_closed_pipe_ends_quietly(tmp_path):
+    """`afa decode gps FILE | head`: no BrokenPipeError traceback when the reader stops."""
+    big = tmp_path / "big.bin"
+    big.write_bytes(GPS_CAPTURE.read_bytes() * 400)  # far more output than a pipe holds
+    process = subprocess.Popen([sys.executable, "-m", "afa", "decode", "gps", str(big)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    assert process.stdout is not None and process.stderr is not None
+    with process:
+        first = process.stdout.readline()
+        process.stdout.close()  # what head does after its lines
+        err = process.stderr.read().decode()
+        assert process.wait(timeout=60) == 0, err
+    assert json.loads(first)["type"] and err == ""
+
+
+def test_decode_with_the_wrong_device_says_nothing_was_decoded(capsys):
+    assert main(["decode", "imu", str(GPS_CAPTURE)]) == 1
+    out, err = capsys.readouterr()
+    assert json.loads(out.splitlines()[-1])["statistics"]["messages"] == 0
+    assert f"nothing decoded from {GPS_CAPTURE} as imu" in err
+    assert "is it a gps capture?" in err
+
+
+def test_decode_prints_a_non_finite_number_as_json_null(tmp_path, capsys):
+    import dataclasses
+    import math
+
+    from components.gps_sokkia.codec import BestPos, GpsDecoder, encode_bestpos_binary
+
+    ascii_capture = ROOT / "tests" / "data" / "gps" / "swri_ascii_nmea.log"
+    fix = next(m for m in GpsDecoder().feed(ascii_capture.read_bytes())
+               if isinstance(m, BestPos))
+    fix = dataclasses.replace(fix, header=dataclasses.replace(fix.header, port="COM1"),
+                              latitude_deg=math.nan, height_msl_m=math.inf)
+    capture = tmp_path / "nan.bin"
+    capture.write_bytes(encode_bestpos_binary(fix))
+    assert main(["decode", "gps", str(capture)]) == 0
+
+    def refuse(constant):
+        raise AssertionError(f"not JSON: {constant}")
+
+    records = [json.loads(line, parse_constant=refuse)
+               for line in capsys.readouterr().out.splitlines()]
+    assert records[0]["type"] == "BestPos"
+    assert records[0]["latitude_deg"] is None and records[0]["height_msl_m"] is None
+    assert records[0]["longitude_deg"] == fix.longitude_deg
+
+
+def test_expose_prints_where_each_emulated_device_is_served():
+    """`--expose` prints its pseudo-terminals and TCP ports whatever the log level (a
+    newcomer needs them to attach a serial tool or a laser client)."""
+    result = subprocess.run(
+        [sys.executable, "-m", "afa", "run", str(RAPTOR), "--sim", "--expose", "--duration",
+         "2", "--log-level", "error"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    served = dict(re.findall(r"^afa: (\S+) emulated on (\S+)$", result.stderr, re.M))
+    assert sorted(served) == sorted(
+        ["NodLaserService", "NodLaserService12", "3dmgService", "GpsSokkiaService",
+         "RaptorOdometryService", "RaptorService"]), result.stderr
+    assert served["3dmgService"].startswith("/dev/pts/")
+    assert re.fullmatch(r"127\.0\.0\.1:\d+", served["NodLaserService"])
+    assert served["RaptorService"] == served["RaptorOdometryService"]  # one MPC555 link
+
+
+def test_real_device_mode_with_silent_devices_says_none_answered(tmp_path, monkeypatch,
+                                                                 capsys):
+    """Ports that open but never speak (a serial port with nothing on it, an address
+    that accepts and sends nothing): the stack never came up and no device answered."""
+    import socket
+
+    monkeypatch.delenv("AFA_FORBID_REAL_DEVICES", raising=False)
+    ptys = [os.openpty() for _ in range(3)]  # serial ports nobody answers on
+    listener = socket.create_server(("127.0.0.1", 0))  # accepts, never sends
+    port = listener.getsockname()[1]
+    try:
+        text = RAPTOR.read_text()
+        for device, (_, terminal) in zip(("/dev/ttyUSB0", "/dev/ttyUSB1", "/dev/ttyS0"), ptys,
+                                         strict=True):
+            text = text.replace(f'value="{device}"', f'value="{os.ttyname(terminal)}"')
+        for host in ("131.135.74.200", "131.135.74.201"):
+            text = text.replace(f'value="{host}"', 'value="127.0.0.1"')
+        text = text.replace('name="Port" value="24750"', f'name="Port" value="{port}"')
+        text = text.replace('value="050917raptor01.XML"',
+                            f'value="{RAPTOR.parent / "050917raptor01.XML"}"')
+        config = tmp_path / "raptor-silent.xml"
+        config.write_text(text)
+        assert main(["run", str(config), "--duration", "1"]) == 1
+    finally:
+        listener.close()
+        for fds in ptys:
+            for fd in fds:
+                os.close(fd)
+    err = capsys.readouterr().err
+    assert "the stack never came up" in err
+    assert "No device answered; did you mean --sim?" in err
+
+
+def test_run_help_lists_the_shipped_worlds(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    out = " ".join(capsys.readouterr().out.split())  # argparse wraps the help text
+    for world in ("rock-field", "open-field", "slalom"):
+        assert world in out.replace("- ", "-")

@@ -352,6 +352,46 @@ async def test_a_handler_that_lets_cancelled_error_escape_fails_its_component():
     assert "CancelledError without being cancelled" in str(leaky.last_error)
 
 
+class _Abort(BaseException):
+    """Not an Exception: what a handler might raise by mistake (or a library's own)."""
+
+
+def _self_cancel():
+    task = asyncio.current_task()
+    assert task is not None
+    task.cancel()  # the handler cancels its own delivery task
+
+
+@pytest.mark.parametrize("ending", ["cancels its own task", "raises a BaseException"])
+async def test_a_handler_that_ends_any_other_way_than_returning_fails_its_component(ending):
+    """Issue 16, defect 5: the subscription must not die silently with the component
+    left RUNNING and healthy; the component fails, is restarted and receives again."""
+    clock = VirtualClock(start=0.0)
+
+    class Leaky(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.subscribes("A", Tick, self.on_tick)
+            self.seen = 0
+
+        async def on_tick(self, event):
+            self.seen += 1
+            if self.seen % 3 == 0:  # every third event
+                if ending == "cancels its own task":
+                    _self_cancel()
+                    await asyncio.sleep(0)
+                raise _Abort("handler gave up")
+
+    leaky, ticker = Leaky("Leaky"), Ticker("Ticker", "A")
+    async with System([leaky, ticker], clock=clock,
+                      restart_policy=RestartPolicy(initial=0.1)):
+        await until(lambda: leaky.failures >= 2, clock, timeout=5.0)
+        assert leaky.restarts >= 1
+        await until(lambda: leaky.seen >= 7, clock, timeout=5.0)  # receiving again
+    assert isinstance(leaky.last_error, ComponentError)
+    assert "the handler of 'A' raised" in str(leaky.last_error)
+
+
 async def test_statistics_after_a_failed_setup_never_raise():
     clock = VirtualClock(start=0.0)
 
@@ -395,3 +435,25 @@ def test_components_are_typed_by_their_parameter_model():
     assert isinstance(gps.parameters, GpsSokkiaParameters)
     with pytest.raises(ComponentError, match="expected GpsSokkiaParameters"):
         GpsSokkia("Gps", Tick(n=1))  # type: ignore[arg-type]
+
+
+async def test_a_components_log_messages_name_it_without_a_formatter(caplog):
+    """In a notebook with no logging set up, Python prints a warning's message alone:
+    a component's messages must say which component they are about (once)."""
+    clock = VirtualClock(start=0.0)
+
+    class Chatty(SubscribePublishServer):
+        async def run(self):
+            self.log.warning("no fix for %d s", 3)
+            self.log.warning("%s: already named", self.name)
+            self.log.info("the %s component is up", self.name)
+
+    chatty = Chatty("Chatty")
+    caplog.set_level("INFO", logger="afa.component.Chatty")
+    async with System([chatty], clock=clock):
+        await clock.advance(0.1)
+    messages = [r.getMessage() for r in caplog.records if r.name == "afa.component.Chatty"]
+    assert "Chatty: no fix for 3 s" in messages
+    assert "Chatty: already named" in messages
+    assert "the Chatty component is up" in messages
+    assert all(m.count("Chatty") == 1 for m in messages), messages
