@@ -82,7 +82,13 @@ class Peer:
         self.process.kill()
 
     def wait(self, timeout: float = 60.0) -> int:
-        code = self.process.wait(timeout)
+        try:
+            code = self.process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait(timeout)
+            raise AssertionError(f"{self.args} did not end within {timeout:g} s; its log:\n"
+                                 + "\n".join(self.errors[-40:])) from None
         for thread in self._threads:
             thread.join(timeout)
         for stream in (self.process.stdout, self.process.stderr):
