@@ -4,7 +4,8 @@ Runs the whole Raptor stack of ``configs/raptor.xml`` on a simulated world in vi
 time with the console attached and a headless Chromium watching, pauses the clock after
 ``--seconds`` simulated seconds, and saves a screenshot of the page and of each pane.
 
-Usage: ``python docs/console/capture.py [--world rock-field] [--seconds 60] [--out DIR]``
+Usage: ``python docs/console/capture.py [--world rock-field] [--seconds 60] [--out DIR]``;
+then the Replay pane on a recording of a 20 s run (``--replay-only``: that alone)
 (needs ``pip install -e '.[test]'`` for Playwright and Debian's ``chromium``).
 """
 
@@ -79,5 +80,40 @@ async def main() -> None:
     print(f"screenshots in {args.out}")
 
 
+def record(path: Path, seconds: float = 20.0) -> Path:
+    """A recording of a short autonomous run (for the Replay pane)."""
+    from afa.cli import main as afa_main
+
+    afa_main(["run", str(ROOT / "configs" / "raptor.xml"), "--sim", "--fast",
+              "--duration", f"{seconds:g}", "--record", str(path)])
+    return path
+
+
+async def replay_pane(recording: Path, out: Path, chromium: str) -> None:
+    """The Replay pane on ``recording``, sought to 10 s (a tall page: nothing over it)."""
+    from afa.log.player import Player
+
+    player = Player(recording, speed=1.0, paused=True)
+    console = Console(player.system, ConsoleOptions(port=0), replay=player)
+    async with console, player, async_playwright() as playwright:
+        browser = await playwright.chromium.launch(executable_path=chromium,
+                                                   headless=True, args=FLAGS)
+        page = await browser.new_page(viewport={"width": 1500, "height": 2400})
+        await page.goto(console.url, timeout=60_000)
+        status = await console.hub.replay_action("seek", 10.0)
+        await console.hub.replay_action("speed", 4)
+        await asyncio.sleep(3.0)
+        await page.locator("#pane-replay").scroll_into_view_if_needed()
+        await page.locator("#pane-replay").screenshot(path=str(out / "replay.png"))
+        await browser.close()
+    print(f"replay pane at {status['position']:.1f} s of {status['duration']:.1f} s")
+
+
 if __name__ == "__main__":
-    asyncio.run(main())
+    import tempfile
+
+    if "--replay-only" not in sys.argv:
+        asyncio.run(main())
+    with tempfile.TemporaryDirectory() as tmp:
+        asyncio.run(replay_pane(record(Path(tmp) / "mission.mcap"), ROOT / "docs" / "console",
+                                "/usr/bin/chromium"))
