@@ -71,7 +71,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
             self.subscribes(p.TraverseEventName, TravMapArrayEventIDL, self._on_map, maxsize=2)
         self._map: TravMapArrayEventIDL | None = None
         self._vetoed_since: float | None = None  # every arc vetoed since then
-        self._backing: tuple[int, float, float] | None = None  # arc, started, until
+        self._backing: tuple[int, float] | None = None  # arc index, reverse until
         self.control = self.uses(VehicleControl, p.VehicleControlName)
         self.arcs = ArcSet.from_parameters()
         self.book = VoteArbiter(p, self.arcs, required=p.RequiredBehaviours)
@@ -122,7 +122,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
     def _on_map(self, event: Event) -> None:
         self._map = event.body  # type: ignore[assignment]
         if self._backing is not None and not self._reverse_clear(
-                self._backing[0], (self._backing[2] - self.clock.monotonic())
+                self._backing[0], (self._backing[1] - self.clock.monotonic())
                 * self.parameters.RecoverSpeed):
             self._backing = None  # the rest of the back-out is blocked: stand
             self.counters["backouts_blocked"] += 1
@@ -155,7 +155,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
                 return decision
         elif self._vetoed_since is None:
             self._vetoed_since = now
-        if self._backing is not None and now >= self._backing[2] - TIME_TOLERANCE:
+        if self._backing is not None and now >= self._backing[1] - TIME_TOLERANCE:
             self._backing = None
             self._vetoed_since = None if decision.failsafe is None else now
         if self._backing is None and self._vetoed_since is not None \
@@ -164,7 +164,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
             preferred = float(self.arcs.curvatures[int(np.argmax(decision.scores))])
             for index in reverse_candidates(self.arcs.curvatures, preferred):
                 if self._reverse_clear(index, p.RecoverDistance):
-                    self._backing = (index, now, now + p.RecoverDistance / p.RecoverSpeed)
+                    self._backing = (index, now + p.RecoverDistance / p.RecoverSpeed)
                     self.counters["backouts"] += 1
                     self.log.info("every arc vetoed for %.1f s: backing out %.1f m on "
                                   "curvature %.3f", p.RecoverAfter, p.RecoverDistance,

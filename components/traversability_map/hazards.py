@@ -387,6 +387,8 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     limit = np.where(far, rules.far_slope, rules.max_slope)
     tan_limit = np.tan(np.radians(limit))
 
+    reach = math.ceil(rules.hole_reach / g - 1e-9)  # cells of hole_reach (module doc, 5)
+
     # --- step: only the higher side of a step is marked (see the module doc)
     around = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURS, (rows, cols))
     differences = elev - around
@@ -394,8 +396,7 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     upper = np.maximum(differences.max(axis=0), 0.0)  # a step above a neighbour
     lower = np.maximum(-differences.min(axis=0), 0.0)  # a step below a neighbour
     with np.errstate(invalid="ignore"):
-        in_pit = _below_surroundings(known & (lower >= threshold), elev, threshold,
-                                     2 * math.ceil(rules.hole_reach / g - 1e-9))
+        in_pit = _below_surroundings(known & (lower >= threshold), elev, threshold, 2 * reach)
     step = np.where(known, np.maximum(high - low, np.where(in_pit, np.maximum(upper, lower),
                                                            upper)), np.nan)
     with np.errstate(invalid="ignore"):
@@ -416,7 +417,6 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     sunken = np.zeros((rows, cols), dtype=bool)
     hole = np.zeros((rows, cols), dtype=bool)
     hole_goodness = np.zeros((rows, cols))
-    reach = math.ceil(rules.hole_reach / g - 1e-9)
     if rules.step_on and reach >= 1:
         sunken, hole, hole_goodness = _negative_obstacles(
             elev, low, goodness, known, step_full, slope, tan_limit, threshold, g, reach)
