@@ -298,18 +298,10 @@ class Bridge:
 
     # -- events out -------------------------------------------------------------------------
     def _exports(self, name: str) -> bool:
-        found = self._export_names.get(name)
-        if found is None:
-            found = self._export_names[name] = keys.chunk_ok(name) and any(
-                fnmatchcase(name, pattern) for pattern in self.parameters.Export)
-        return found
+        return _selected(name, self._export_names, self.parameters.Export)
 
     def _imports(self, name: str) -> bool:
-        found = self._import_names.get(name)
-        if found is None:
-            found = self._import_names[name] = keys.chunk_ok(name) and any(
-                fnmatchcase(name, pattern) for pattern in self.parameters.Import)
-        return found
+        return _selected(name, self._import_names, self.parameters.Import)
 
     def _publisher(self, name: str) -> Any:
         publisher = self._publishers.get(name)
@@ -696,3 +688,12 @@ class Bridge:
             "busy_refusals": self.busy_refusals,
             "lockstep": self.lockstep.statistics() if self.lockstep is not None else None,
         }
+
+
+def _selected(name: str, cache: dict[str, bool], patterns: Any) -> bool:
+    """Whether ``name`` can be a key chunk and matches one of ``patterns`` (cached)."""
+    found = cache.get(name)
+    if found is None:
+        found = cache[name] = keys.chunk_ok(name) and any(
+            fnmatchcase(name, pattern) for pattern in patterns)
+    return found
