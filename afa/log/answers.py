@@ -20,6 +20,8 @@ gets exactly what a component polling the replay at ``T`` would:
 from __future__ import annotations
 
 import asyncio
+import itertools
+from collections.abc import Iterator
 from typing import Any
 
 from afa.clock import VirtualClock
@@ -54,6 +56,8 @@ class RecordedAnswers:
         self._channels = {c.id for c in reader.topics(fmt.POLL)} | {
             c.id for c in reader.topics(fmt.EVENT) if c.event in self._listeners}
         self._fed = False
+        self._later: Iterator[LogMessage] | None = None
+        self._held: list[LogMessage] | None = None
 
     @property
     def time(self) -> float:
@@ -93,9 +97,14 @@ class RecordedAnswers:
             self._deliver(message)
 
     async def _feed_after_position(self, task: asyncio.Future[Any]) -> None:
-        for message in self.reader.messages(start=self.position + 1, channels=self._channels):
+        if self._later is None:  # one pass over the rest, shared by successive getWaits
+            self._later = self.reader.messages(start=self.position + 1,
+                                               channels=self._channels)
+        held, self._held = self._held, None
+        for message in itertools.chain(held or (), self._later):
             await self.clock.advance(max(0.0, message.time - self.clock.now()))
             if task.done():  # the interface's wait_timeout ran out first
+                self._held = [message]  # the next call's
                 return
             self._deliver(message)
             self.position = message.log_time
