@@ -29,6 +29,7 @@ from afa.errors import EDevIO, NameNotFound
 from afa.log import format as fmt
 from afa.log.player import ReplayServant, recorded_servants
 from afa.log.reader import LogError, LogMessage, LogReader
+from afa.tasks import Scope, first_error
 
 __all__ = ["RecordedAnswers"]
 
@@ -77,17 +78,19 @@ class RecordedAnswers:
         chosen time (see the module docstring)."""
         servant = self.servant(name)
         self._feed_to_position()
-        task = asyncio.ensure_future(servant.invoke(method, arguments))
         try:
-            await self.clock.settle()
-            if not task.done():  # a getWait: the messages after the chosen time, in order
-                await self._feed_after_position(task)
-            if not task.done():
-                raise EDevIO(f"{servant.name}.{method}: nothing recorded after "
-                             f"t={self.time:.6f} answers it")
-            return task.result()
-        finally:
-            task.cancel()
+            async with Scope() as scope:
+                task = scope.spawn(servant.invoke(method, arguments), f"recorded {method}")
+                await self.clock.settle()
+                if not task.done():  # a getWait: the messages after the position, in order
+                    await self._feed_after_position(task)
+                if not task.done():
+                    task.cancel()
+                    raise EDevIO(f"{servant.name}.{method}: nothing recorded after "
+                                 f"t={self.time:.6f} answers it")
+        except BaseExceptionGroup as group:  # the servant's error, or the one above
+            raise first_error(group) from None
+        return task.result()
 
     def _feed_to_position(self) -> None:
         if self._fed:
@@ -96,7 +99,7 @@ class RecordedAnswers:
         for message in self.reader.messages(end=self.position + 1, channels=self._channels):
             self._deliver(message)
 
-    async def _feed_after_position(self, task: asyncio.Future[Any]) -> None:
+    async def _feed_after_position(self, task: asyncio.Task[Any]) -> None:
         if self._later is None:  # one pass over the rest, shared by successive getWaits
             self._later = self.reader.messages(start=self.position + 1,
                                                channels=self._channels)
