@@ -194,6 +194,9 @@ def test_top_shows_the_recorded_launcher_table(recording: Path, tool: Tool) -> N
     stepping = tool("top", "--log", str(recording), "--at", "1.1", "--interval", "1").stdout
     assert [line for line in stepping.splitlines() if line.startswith("# ")] == [
         "# small.mcap at 1.100 s", "# small.mcap at 2.100 s", "# small.mcap at 3.100 s"]
+    listed = tool("log", "info", str(recording)).stdout.splitlines()
+    assert listed[listed.index("the Launcher's table (afa top --log):") + 1].split() == [
+        "/afa/statistics", "3", "0.882", "Hz"]  # 3 tables over the 3.4 s recording
     none = tool("top", "--log", str(recording), "--at", "0.5", check=False)
     assert none.returncode == 1 and "no component statistics at or before 0.5 s; the first " \
         "is at 1.100 s" in none.stderr
