@@ -218,7 +218,7 @@ def test_sensor3d_stream_reads_a_recording_through_its_recorded_transformation(
     lines = tool("sensor3d", "stream", "Laser11", "--count", "1", "--log",
                  str(recording)).stdout.splitlines()
     assert lines[0].startswith("# Laser11 t=") and "-> Raptor:RearAxleCenter: 2 points" in lines[0]
-    assert lines[1:] == ["1.500 0.000 1.000", "2.500 0.000 1.000"]  # through the recorded pose
+    assert lines[1:] == ["1.500 0.000 1.000", "2.600 0.000 1.000"]  # through the recorded pose
     missing = tool("sensor3d", "stream", "Laser11", "--frame", "Raptor:Nowhere", "--log",
                    str(recording), check=False)
     assert missing.returncode == 1 and "no recorded getTransformation" in missing.stderr
