@@ -65,6 +65,8 @@ async def run_tool(name: str, args: argparse.Namespace, body: Body) -> int:
     try:
         if getattr(args, "log", None) is None and getattr(args, "at", None) is not None:
             raise InterfaceError("--at T chooses a time in a recording: give --log FILE.mcap")
+        if getattr(args, "log", None) is None and getattr(args, "next", False):
+            raise InterfaceError("--next steps through a recording: give --log FILE.mcap")
         if getattr(args, "log", None) is not None:
             source = LogSource(Path(args.log))
             try:

@@ -108,6 +108,9 @@ def test_poll_on_a_recording_names_what_it_lacks(recording: Path, tool: Tool,
     assert f"lasts {scans[-1]:.3f} s" in outside.stderr
     live = tool("poll", "Laser11", "get3dSeqFullScan", "--at", "1", check=False)
     assert live.returncode == 2 and "give --log FILE.mcap" in live.stderr
+    following = tool("sensor3d", "get", "Laser11", "--next", "--connect", "tcp/127.0.0.1:9",
+                     check=False)
+    assert following.returncode == 2 and "--next steps through a recording" in following.stderr
     missing = tool("poll", "Laser11", "get3dSeqFullScan", "--log", str(tmp_path / "no.mcap"),
                    check=False)
     assert missing.returncode == 1 and "no.mcap: cannot open: No such file" in missing.stderr
