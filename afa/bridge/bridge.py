@@ -574,6 +574,10 @@ class Bridge:
                 else:
                     self._serving += 1
                     self._spawn_query(query)
+            # the inbox is empty again: a lock-step member waiting to be idle must look
+            # again (a call that waits for a later instant sets nothing until it ends,
+            # and that instant is granted only once this process reports idle)
+            self.changed.set()
 
     def _spawn_query(self, query: Any) -> None:
         task = self.system.tasks.spawn(self._serve(query), owner="bridge",

@@ -79,6 +79,7 @@ def _summary(reader: LogReader) -> dict[str, Any]:
         "metadata": {k: v for k, v in afa.items()},
         "config": reader.metadata.get(fmt.META_CONFIG, {}).get("path"),
         "events": rows(fmt.EVENT), "polls": rows(fmt.POLL), "viewer": rows(fmt.VIEWER),
+        "statistics": rows(fmt.STATISTICS),
         "dropped": dropped or {"events_dropped": 0, "polls_dropped": 0},
         "problems": list(reader.problems),
     }
@@ -102,7 +103,8 @@ def info(args: argparse.Namespace) -> int:
                                          if "world" in meta else ""))
     if summary["config"]:
         print(f"  configuration {summary['config']}")
-    for title, key in (("events", "events"), ("polls", "polls"), ("viewer channels", "viewer")):
+    for title, key in (("events", "events"), ("polls", "polls"), ("viewer channels", "viewer"),
+                       ("the Launcher's table (afa top --log)", "statistics")):
         if summary[key]:
             print(f"{title}:")
             for row in summary[key]:

@@ -12,6 +12,10 @@ topic                               message encoding  data
                                                      arguments, result or error, duration
 ``/afa/dropped``                    ``afa-wire``     a :class:`DroppedIDL` frame: what the
                                                      recorder could not keep, counted
+``/afa/statistics``                 ``json``         the Launcher's table once per flush period
+                                                     (``afa top --log``): per component its
+                                                     state, health, restarts, events in and
+                                                     out and loop time; the clock and memory
 ``/viz/...``                        ``json``         Foxglove schemas, for viewers
                                                      (:mod:`afa.log.viewer`)
 ==================================  ===============  ==========================================
@@ -20,9 +24,9 @@ Event and poll channels have schema encoding ``jsonschema``: the schema's name i
 qualified, versioned IDL type name (``idl.common.PoseTransformIDL@1``) and its data is
 :func:`idl.wire.schema` of the type, so a reader knows each channel's type without
 decoding a message, and refuses a newer version by name. Channel metadata says what a
-channel is (``afa.kind`` = ``event``, ``poll``, ``dropped`` or ``viewer``). Times are
-nanoseconds since the Unix epoch (the clock's stamps); the exact float stamp travels in
-the event envelope.
+channel is (``afa.kind`` = ``event``, ``poll``, ``dropped``, ``statistics`` or
+``viewer``). Times are nanoseconds since the Unix epoch (the clock's stamps); the exact
+float stamp travels in the event envelope.
 
 Metadata records: ``afa`` (version, start time, clock, clock origin, command, world and
 seed in simulation), ``afa.config`` (the configuration file's path and text),
@@ -40,7 +44,8 @@ from idl._base import Array, IDLModel, field
 
 __all__ = [
     "PROFILE", "EVENT_ENCODING", "WIRE_ENCODING", "SCHEMA_ENCODING", "JSON_ENCODING",
-    "KIND", "EVENT", "POLL", "DROPPED", "VIEWER", "DROPPED_TOPIC", "POLL_PREFIX",
+    "KIND", "EVENT", "POLL", "DROPPED", "STATISTICS", "VIEWER", "DROPPED_TOPIC",
+    "STATISTICS_TOPIC", "POLL_PREFIX",
     "META_AFA", "META_CONFIG", "META_CATALOG", "META_END", "PollCallIDL", "DroppedIDL",
     "event_topic", "poll_topic", "to_ns", "from_ns",
 ]
@@ -56,9 +61,11 @@ KIND = "afa.kind"
 EVENT = "event"
 POLL = "poll"
 DROPPED = "dropped"
+STATISTICS = "statistics"
 VIEWER = "viewer"
 
 DROPPED_TOPIC = "/afa/dropped"
+STATISTICS_TOPIC = "/afa/statistics"
 POLL_PREFIX = "/afa/poll/"
 
 META_AFA = "afa"

@@ -32,7 +32,7 @@ import json
 import logging
 import types
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 from fnmatch import fnmatchcase
 from pathlib import Path
@@ -52,7 +52,8 @@ from afa.system import System
 from idl import wire
 from idl._base import IDLModel, Interface, type_name
 
-__all__ = ["Player", "ReplayServant", "known_interfaces", "check"]
+__all__ = ["Player", "ReplayServant", "known_interfaces", "recorded_servants",
+           "check"]
 
 log = logging.getLogger("afa.log")
 
@@ -102,6 +103,11 @@ class ReplayServant:
         self._slots: dict[str, LatestSlot[Any]] = {}  # by topic
         self._by_type = topics  # qualified versioned type -> the topic carrying it
         self._clock = clock
+
+    @property
+    def topics(self) -> set[str]:
+        """The event names its ``get…`` answers come from (what its component published)."""
+        return set(self._by_type.values())
 
     def slot(self, topic: str) -> LatestSlot[Any]:
         slot = self._slots.get(topic)
@@ -166,6 +172,48 @@ class ReplayServant:
     def heard(self, method: str, result: Any) -> None:
         """A recorded result of ``method`` has been replayed (wakes getWait callers)."""
         self.slot(f"poll:{method}").set(result)
+
+    def replay(self, record: fmt.PollCallIDL) -> None:
+        """A recorded call to this server: its answer is kept and getWait callers woken."""
+        result, arguments = bytes(record.result), bytes(record.arguments)
+        self.record(record.method, arguments, result, record.error_kind,
+                    record.error_message)
+        if not record.error_kind and result:
+            try:
+                self.heard(record.method, decode_poll_result(self.interface, record.method,
+                                                             result))
+            except AfaError:
+                pass
+
+
+def recorded_servants(reader: LogReader, robot: str, clock: Any, decode: Any,
+                      rerun: Collection[str] = ()) -> dict[str, ReplayServant]:
+    """A :class:`ReplayServant` for every recorded server whose component is not in
+    ``rerun``, by full name: what a replay binds, and what ``afa poll --log`` asks.
+    ``decode`` turns a recorded event message into the body a ``get…`` answers with.
+    A server of an interface this program does not know is named in ``reader.problems``."""
+    interfaces = known_interfaces()
+    ports = reader.catalog()
+    servants: dict[str, ReplayServant] = {}
+    for port in ports:
+        if port.get("direction") != "serves" or port.get("component") in rerun:
+            continue
+        types = port.get("types") or []
+        interface = interfaces.get(types[0]) if types else None
+        if interface is None:
+            reader.problems.append(
+                f"{reader.path}: server {port.get('name')} serves {types}, which this "
+                "afa does not know: its polls are not answered")
+            continue
+        topics: dict[str, str] = {}
+        for other in ports:
+            if other.get("component") == port.get("component") and \
+                    other.get("direction") == "publishes":
+                for published in other.get("types") or []:
+                    topics.setdefault(published, other.get("name", ""))
+        name = join_name(robot, str(port.get("name")))
+        servants[name] = ReplayServant(interface, name, clock, topics, decode)
+    return servants
 
 
 class Player:
@@ -326,28 +374,7 @@ class Player:
         return order or [(c.name, delays.get(c.name, 0.0)) for c in components]
 
     def _servants(self, rerun: set[str]) -> dict[str, ReplayServant]:
-        interfaces = known_interfaces()
-        ports = self.reader.catalog()
-        servants: dict[str, ReplayServant] = {}
-        for port in ports:
-            if port.get("direction") != "serves" or port.get("component") in rerun:
-                continue
-            types = port.get("types") or []
-            interface = interfaces.get(types[0]) if types else None
-            if interface is None:
-                self.reader.problems.append(
-                    f"{self.reader.path}: server {port.get('name')} serves {types}, which this "
-                    "afa does not know: its polls are not answered")
-                continue
-            topics: dict[str, str] = {}
-            for other in ports:
-                if other.get("component") == port.get("component") and \
-                        other.get("direction") == "publishes":
-                    for published in other.get("types") or []:
-                        topics.setdefault(published, other.get("name", ""))
-            name = join_name(self.robot, str(port.get("name")))
-            servants[name] = ReplayServant(interface, name, self.clock, topics, self._body)
-        return servants
+        return recorded_servants(self.reader, self.robot, self.clock, self._body, rerun)
 
     def _body(self, message: LogMessage) -> Any:
         event = self.reader.decode_event(message)
@@ -506,17 +533,8 @@ class Player:
             self._expected.setdefault(("poll", record.caller, record.server, record.method),
                                       deque()).append((message.time, record))
         servant = self.servants.get(record.server)
-        if servant is None:
-            return
-        result, arguments = bytes(record.result), bytes(record.arguments)
-        servant.record(record.method, arguments, result, record.error_kind,
-                       record.error_message)
-        if not record.error_kind and result:
-            try:
-                servant.heard(record.method, decode_poll_result(servant.interface,
-                                                                record.method, result))
-            except AfaError:
-                pass
+        if servant is not None:
+            servant.replay(record)
 
     # -- controls ------------------------------------------------------------------------
     @property

@@ -12,7 +12,7 @@ from afa.bridge.parameters import DEFAULT_ENDPOINT
 __all__ = ["add_parsers"]
 
 
-def _common(parser: argparse.ArgumentParser, *, log: bool = True) -> None:
+def _common(parser: argparse.ArgumentParser) -> None:
     where = parser.add_argument_group("where to look")
     where.add_argument("--connect", action="append", metavar="ENDPOINT",
                        help=f"Zenoh endpoint of a running afa process (default "
@@ -20,9 +20,14 @@ def _common(parser: argparse.ArgumentParser, *, log: bool = True) -> None:
     where.add_argument("--robot", default="*", help="robot name (default: any)")
     where.add_argument("--as", dest="identity", default="tool", metavar="NAME",
                        help="the name this tool calls as (Bridge/AllowCommandFrom)")
-    if log:
-        where.add_argument("--log", type=Path, metavar="FILE.mcap",
-                           help="read a recording instead of a running system")
+    where.add_argument("--log", type=Path, metavar="FILE.mcap",
+                       help="read a recording instead of a running system")
+
+
+def _at(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument("--at", type=float, metavar="T",
+                        help=f"with --log: {what} at T seconds after the recording's first "
+                             "message (default: its end)")
 
 
 def _handler(name: str) -> Any:
@@ -73,8 +78,10 @@ def add_parsers(commands: Any) -> None:
                            "@FILE reads one from a file")
     poll.add_argument("--json", action="store_true", help="print the result as JSON")
     poll.add_argument("--timeout", type=float, help="seconds (default: the interface's)")
-    _common(poll, log=False)
-    poll.set_defaults(handler=_handler("poll"), log=None)
+    _common(poll)
+    _at(poll, "answer as the replay would (get...: the latest recorded value; "
+              "getWait...: the next one)")
+    poll.set_defaults(handler=_handler("poll"))
 
     sensor = commands.add_parser("sensor3d", help="range points as text, in the Raptor frame "
                                                   "(Sensor3dStream, Sensor3dGet)")
@@ -86,20 +93,24 @@ def add_parsers(commands: Any) -> None:
     get.add_argument("--form", choices=["auto", "laser", "seq", "stereo", "array"],
                      default="auto", help="which scan (Table 31); auto: laser, else stereo")
     get.add_argument("--timeout", type=float)
-    for parser, log in ((stream, True), (get, False)):
+    get.add_argument("--next", action="store_true",
+                     help="with --log: the next scan after --at (the getWait form) rather "
+                          "than the latest at or before it")
+    _at(get, "the scan")
+    for parser, repeat in ((stream, True), (get, False)):
         parser.add_argument("--frame", default="Raptor:RearAxleCenter",
                             help="target frame (ModelServer's getTransformation); 'sensor' "
                                  "leaves the points in the sensor's own frame")
-        parser.add_argument("--count", type=int, default=0 if log else 1, metavar="N",
-                            help="scans to print" + (" (default: until stopped)" if log
+        parser.add_argument("--count", type=int, default=0 if repeat else 1, metavar="N",
+                            help="scans to print" + (" (default: until stopped)" if repeat
                                                      else " (default 1)"))
         parser.add_argument("--every", type=int, default=1, metavar="K",
                             help="print every K-th point")
         parser.add_argument("--max-points", type=int, default=0, metavar="N",
                             help="at most N points per scan")
-        _common(parser, log=log)
+        _common(parser)
     stream.set_defaults(handler=_handler("sensor3d_stream"))
-    get.set_defaults(handler=_handler("sensor3d_get"), log=None)
+    get.set_defaults(handler=_handler("sensor3d_get"))
 
     top = commands.add_parser("top", help="the Launcher table: state, health, restarts, "
                                           "events, loop share, memory, refreshed")
@@ -107,5 +118,6 @@ def add_parsers(commands: Any) -> None:
                      help="seconds between refreshes (default 2)")
     top.add_argument("--once", action="store_true", help="print one table and exit")
     top.add_argument("--count", type=int, default=0, metavar="N", help="stop after N tables")
-    _common(top, log=False)
-    top.set_defaults(handler=_handler("top"), log=None)
+    _common(top)
+    _at(top, "the table (each refresh steps on by --interval of recorded time)")
+    top.set_defaults(handler=_handler("top"))

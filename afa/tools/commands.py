@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import bisect
 import json
 import math
 import signal
@@ -38,8 +39,14 @@ from afa.tasks import Scope
 from afa.tools.attach import Attachment, Unreachable
 from afa.tools.source import LiveSource, LogSource, Source, Unavailable
 from afa.tools.text import Output, PipeClosed, brief, event_json, event_line, table
-from idl import Range3dSensor
-from idl._base import IDLModel, MethodSpec
+from idl import (
+    Range3dArrayEventIDL,
+    Range3dLaserIDL,
+    Range3dSensor,
+    Range3dSeqEventIDL,
+    Range3dStereoEventIDL,
+)
+from idl._base import IDLModel, Interface, MethodSpec
 
 __all__ = ["run_tool", "echo", "hz", "names", "poll", "sensor3d_stream", "sensor3d_get",
            "top", "VEHICLE_FRAME"]
@@ -51,17 +58,16 @@ VEHICLE_FRAME = "Raptor:RearAxleCenter"
 Body = Callable[[Source, Output, argparse.Namespace], Awaitable[int]]
 
 
-async def run_tool(name: str, args: argparse.Namespace, body: Body, *,
-                   live_only: bool = False) -> int:
+async def run_tool(name: str, args: argparse.Namespace, body: Body) -> int:
     """Run ``body`` against the source ``args`` names, until it returns, Ctrl-C, SIGTERM
     or a closed pipe."""
     out = Output()
     try:
+        if getattr(args, "log", None) is None and getattr(args, "at", None) is not None:
+            raise InterfaceError("--at T chooses a time in a recording: give --log FILE.mcap")
+        if getattr(args, "log", None) is None and getattr(args, "next", False):
+            raise InterfaceError("--next steps through a recording: give --log FILE.mcap")
         if getattr(args, "log", None) is not None:
-            if live_only:
-                raise Unavailable(f"afa {name} works on a running system only (a recording "
-                                  "cannot answer polls here); replay it with `afa replay "
-                                  "FILE --bridge` and attach to that")
             source = LogSource(Path(args.log))
             try:
                 return await _until_signal(body(source, out, args))
@@ -291,25 +297,47 @@ def _show(result: Any, as_json: bool) -> str:
 
 
 async def poll(args: argparse.Namespace) -> int:
-    return await run_tool("poll", args, _poll, live_only=True)
+    return await run_tool("poll", args, _poll)
 
 
 async def _poll(source: Source, out: Output, args: argparse.Namespace) -> int:
-    assert isinstance(source, LiveSource)
-    link = source.attachment
-    robot, qualified, interface = link.server(args.name)
-    if interface is None:
-        raise Unavailable(f"{args.name} serves {qualified}, an interface this program does "
-                          "not know")
+    interface, call = _server(source, args.name, args)
     spec = interface.methods.get(args.method)
     if spec is None:
         raise InterfaceError(f"{interface.__name__} has no method {args.method!r}; it has "
                              f"{', '.join(interface.methods)}")
     arguments = parse_arguments(spec, args.args, f"{args.name}.{args.method}")
-    result = await link.call(robot, args.name, interface, args.method, arguments,
-                             timeout=args.timeout)
-    out.write(_show(result, args.json))
+    out.write(_show(await call(args.method, arguments), args.json))
     return EXIT_OK
+
+
+Call = Callable[[str, dict[str, Any]], Awaitable[Any]]
+
+
+def _server(source: Source, name: str, args: argparse.Namespace
+            ) -> tuple[type[Interface], Call]:
+    """The interface ``name`` serves and how to call it: over the bridge, or from a
+    recording, answered as its replay would at ``--at`` (:mod:`afa.log.answers`)."""
+    if isinstance(source, LogSource):
+        answers = source.answers(args.at)
+        interface = answers.servant(name).interface
+
+        async def recorded(method: str, arguments: dict[str, Any]) -> Any:
+            return await answers.call(name, method, arguments)
+
+        return interface, recorded
+    assert isinstance(source, LiveSource)
+    link = source.attachment
+    robot, qualified, known = link.server(name)
+    if known is None:
+        raise Unavailable(f"{name} serves {qualified}, an interface this program does "
+                          "not know")
+    served: type[Interface] = known
+
+    async def live(method: str, arguments: dict[str, Any]) -> Any:
+        return await link.call(robot, name, served, method, arguments, timeout=args.timeout)
+
+    return served, live
 
 
 # -- sensor3d ------------------------------------------------------------------------------------
@@ -386,39 +414,63 @@ async def _range_events(source: Source, name: str) -> AsyncIterator[Event]:
         yield event
 
 
-#: --form -> the Range3dSensor method (Table 31)
+#: --form -> the Range3dSensor method (Table 31) and what it answers
 FORMS = {"laser": "get3dLaserFullScan", "seq": "get3dSeqFullScan",
          "stereo": "get3dStereoFullScan", "array": "get3dArrayFullScan"}
+FORMS_TYPES = {"laser": Range3dLaserIDL, "seq": Range3dSeqEventIDL,
+               "stereo": Range3dStereoEventIDL, "array": Range3dArrayEventIDL}
 
 
 async def sensor3d_get(args: argparse.Namespace) -> int:
-    return await run_tool("sensor3d get", args, _get, live_only=True)
+    return await run_tool("sensor3d get", args, _get)
 
 
 async def _get(source: Source, out: Output, args: argparse.Namespace) -> int:
-    assert isinstance(source, LiveSource)
-    link = source.attachment
-    robot, _, interface = link.server(args.name)
-    if interface is None or not issubclass(interface, Range3dSensor):
+    interface, call = _server(source, args.name, args)
+    if not issubclass(interface, Range3dSensor):
         raise InterfaceError(f"{args.name} does not serve Range3dSensor")
     frames = _Frames(source, args.frame)
     forms = [args.form] if args.form != "auto" else ["laser", "stereo"]
     for number in range(max(1, args.count)):
-        scan: Any = None
-        for form in forms:
-            try:
-                scan = await link.call(robot, args.name, interface, FORMS[form], {},
-                                       timeout=args.timeout)
-                break
-            except EDevIO:
-                if form == forms[-1]:
-                    raise
+        if isinstance(source, LogSource):
+            scan = await _recorded_scan(source, call, args, next_one=args.next or number > 0)
+        else:
+            scan = await _scan(call, forms)
         points = range_points(scan)
-        assert points is not None and scan is not None
+        assert points is not None
         _print_points(out, args.name, scan, await frames.apply(scan.frame, points), args.frame,
                       args)
-        del number
     return EXIT_OK
+
+
+async def _recorded_scan(source: LogSource, call: Call, args: argparse.Namespace, *,
+                         next_one: bool) -> Any:
+    """The recorded scan at ``--at`` (the latest at or before it; if there is none, or
+    ``next_one``, the next). A getWait reads the recording on, so the form is found
+    first, without waiting: the one the recording answers at ``--at``, else at its end."""
+    forms = [args.form] if args.form != "auto" else list(FORMS)
+    if not next_one:
+        try:
+            return await _scan(call, forms)
+        except EDevIO:
+            pass  # nothing before --at: the next
+    if len(forms) > 1:
+        at_end = source.answers(None)
+        scan = await _scan(lambda method, _: at_end.call(args.name, method, {}), forms)
+        forms = [next(form for form in forms if isinstance(scan, FORMS_TYPES[form]))]
+    return await call(FORMS[forms[0]].replace("FullScan", "WaitFullScan"), {})
+
+
+async def _scan(call: Call, forms: list[str]) -> Any:
+    """The scan of the first of ``forms`` the sensor answers; the last one's error if
+    none does."""
+    for form in forms:
+        try:
+            return await call(FORMS[form], {})
+        except EDevIO:
+            if form == forms[-1]:
+                raise
+    raise InterfaceError("no scan form given")
 
 
 # -- top -----------------------------------------------------------------------------------------
@@ -446,6 +498,17 @@ class _Shares:
         return f"{100 * value:.1f}%"
 
 
+def _traffic(bridge: dict[str, Any]) -> str:
+    """The bridge's line of a process's block in ``afa top``."""
+    peers = ", ".join(bridge.get("peers", [])) or "none"
+    return (f"  bridge: peers {peers}; events out {sum(bridge.get('exported', {}).values())}"
+            f", in {sum(bridge.get('imported', {}).values())}, dropped "
+            f"{bridge.get('export_dropped', 0) + bridge.get('import', {}).get('dropped', 0)}"
+            f", rejected {sum(bridge.get('rejected', {}).values())}; calls served "
+            f"{bridge.get('calls_served', 0)}, refused commands "
+            f"{bridge.get('commands_refused', 0)}")
+
+
 def render_top(infos: list[dict[str, Any]], shares: _Shares) -> str:
     """The Launcher table of every process (``afa top``)."""
     blocks = []
@@ -464,13 +527,9 @@ def render_top(infos: list[dict[str, Any]], shares: _Shares) -> str:
                 f"{_megabytes(memory.get('peak_rss_bytes'))})  components' loop share "
                 f"{100 * busy / wall:.1f}%" if wall else
                 f"{info['robot']}/{info['process']}  pid {info['pid']}")
-        peers = ", ".join(bridge.get("peers", [])) or "none"
-        traffic = (f"  bridge: peers {peers}; events out {sum(bridge.get('exported', {}).values())}"
-                   f", in {sum(bridge.get('imported', {}).values())}, dropped "
-                   f"{bridge.get('export_dropped', 0) + bridge.get('import', {}).get('dropped', 0)}"
-                   f", rejected {sum(bridge.get('rejected', {}).values())}; calls served "
-                   f"{bridge.get('calls_served', 0)}, refused commands "
-                   f"{bridge.get('commands_refused', 0)}")
+        lines = [head]
+        if "bridge" in info:  # a recording has none
+            lines.append(_traffic(bridge))
         rows = []
         for row in info["components"]:
             health = "ok" if row["healthy"] else (row["detail"] or "unhealthy")
@@ -479,16 +538,18 @@ def render_top(infos: list[dict[str, Any]], shares: _Shares) -> str:
             rows.append([row["name"], row["type"], row["state"], health, row["restarts"],
                          row.get("events_in", 0), row.get("events_out", 0),
                          shares.share(info["process"], row, wall)])
-        blocks.append("\n".join([head, traffic, table(
+        blocks.append("\n".join([*lines, table(
             ["COMPONENT", "TYPE", "STATE", "HEALTH", "RESTARTS", "IN", "OUT", "LOOP"], rows)]))
     return "\n\n".join(blocks)
 
 
 async def top(args: argparse.Namespace) -> int:
-    return await run_tool("top", args, _top, live_only=True)
+    return await run_tool("top", args, _top)
 
 
 async def _top(source: Source, out: Output, args: argparse.Namespace) -> int:
+    if isinstance(source, LogSource):
+        return await _top_recorded(source, out, args)
     assert isinstance(source, LiveSource)
     link = source.attachment
     shares = _Shares()
@@ -498,10 +559,40 @@ async def _top(source: Source, out: Output, args: argparse.Namespace) -> int:
         infos = await link.infos()
         if not infos:
             raise Unreachable(f"the system at {link.where} stopped answering")
-        text = render_top(infos, shares)
-        out.write(("\x1b[H\x1b[2J" if clear else "") + text
-                  + ("" if clear else "\n"))
+        _show_table(out, render_top(infos, shares), clear)
         frames += 1
         if args.once or (args.count and frames >= args.count):
             return EXIT_OK
         await asyncio.sleep(args.interval)
+
+
+def _show_table(out: Output, text: str, clear: bool) -> None:
+    out.write(("\x1b[H\x1b[2J" if clear else "") + text + ("" if clear else "\n"))
+
+
+async def _top_recorded(source: LogSource, out: Output, args: argparse.Namespace) -> int:
+    """The recorded table at ``--at`` (default: the last), then, unless ``--once``, one
+    every ``--interval`` of recorded time to the end (paced on a terminal). The loop
+    share of the first is over the recorder's period before it."""
+    tables = source.statistics()
+    times = [t for t, _ in tables]
+    at = times[-1] if args.at is None else args.at
+    index = bisect.bisect_right(times, at) - 1
+    if index < 0:
+        raise Unavailable(f"{source.path} has no component statistics at or before "
+                          f"{at:g} s; the first is at {times[0]:.3f} s")
+    shares = _Shares()
+    if index > 0:
+        render_top([tables[index - 1][1]], shares)  # the loop share's starting point
+    clear = sys.stdout.isatty() and not args.once
+    frames = 0
+    while True:
+        _show_table(out, f"# {source.path.name} at {times[index]:.3f} s\n"
+                    + render_top([tables[index][1]], shares), clear)
+        frames += 1
+        at += args.interval
+        if args.once or (args.count and frames >= args.count) or at > times[-1]:
+            return EXIT_OK
+        index = bisect.bisect_right(times, at) - 1
+        if clear:
+            await asyncio.sleep(args.interval)

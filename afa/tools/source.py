@@ -4,7 +4,12 @@ recording (:class:`LogSource`, ``--log FILE.mcap``), behind one small interface:
 - ``events(name)``: the events of ``name`` (a pattern), in order;
 - ``names()``: served names with interface, owner and process;
 - ``transformation(A, B)``: ModelServer's ``getTransformation`` (live: a poll; a
-  recording: the last recorded answer to that poll, if one was recorded).
+  recording: the last recorded answer to that poll, else, from the vehicle frame, the
+  geometry the recorder wrote for viewers, ``/viz/tf``).
+
+A recording also answers polls as its replay would (:meth:`LogSource.answers`,
+:mod:`afa.log.answers`) and holds the Launcher's table once per flush period
+(:meth:`LogSource.statistics`, ``afa top --log``).
 
 A recording is read through ``afa.log`` (the record/replay package); a build without it
 says so instead of pretending.
@@ -12,6 +17,7 @@ says so instead of pretending.
 
 from __future__ import annotations
 
+import json
 from collections.abc import AsyncIterator
 from fnmatch import fnmatchcase
 from pathlib import Path
@@ -115,6 +121,27 @@ class LogSource:
                              "remote": False})
         return rows
 
+    def answers(self, at: float | None) -> Any:
+        """The recorded servers answering as of ``at`` s after the recording's first
+        message (None: its end): a :class:`afa.log.answers.RecordedAnswers`."""
+        from afa.log.answers import RecordedAnswers
+
+        return RecordedAnswers(self.reader, at)
+
+    def statistics(self) -> list[tuple[float, dict[str, Any]]]:
+        """The recorded Launcher tables: (seconds after the recording's first message,
+        the table's document), in order. Raises Unavailable if the recording has none."""
+        from afa.log import format as fmt
+
+        channels = [c.id for c in self.reader.topics(fmt.STATISTICS)]
+        tables = [(fmt.from_ns(m.log_time - self.reader.start), json.loads(m.data))
+                  for m in self.reader.messages(channels=channels)]
+        if not tables:
+            raise Unavailable(f"{self.path} holds no component statistics (recorded by an "
+                              "afa before they were written, or shorter than one flush "
+                              "period)")
+        return tables
+
     async def transformation(self, a: str, b: str) -> np.ndarray:
         from afa.polling import decode_arguments, decode_result
 
@@ -128,7 +155,38 @@ class LogSource:
             arguments = decode_arguments(Platform, "getTransformation", bytes(record.arguments))
             if arguments == {"A": a, "B": b}:
                 found = decode_result(Platform, "getTransformation", bytes(record.result))
-        if found is None:
-            raise Unavailable(f"{self.path} holds no recorded getTransformation({a}, {b}); "
-                              "print the points in the sensor frame with --frame sensor")
-        return np.asarray(found.HTransform, dtype=float)
+        if found is not None:
+            return np.asarray(found.HTransform, dtype=float)
+        geometry = self._recorded_geometry(a, b)
+        if geometry is None:
+            raise Unavailable(f"{self.path} holds no recorded getTransformation({a}, {b}) "
+                              "and no recorded geometry of that frame; print the points in "
+                              "the sensor frame with --frame sensor")
+        return geometry
+
+    def _recorded_geometry(self, a: str, b: str) -> np.ndarray | None:
+        """^a T_b from the last static transform the recorder wrote for viewers (it asks
+        ModelServer for every frame's place in the vehicle frame), or None."""
+        from afa.log.viewer import TF_TOPIC, VEHICLE_FRAME
+
+        channels = [c.id for c in self.reader.topics() if c.topic == TF_TOPIC]
+        if a != VEHICLE_FRAME or not channels:
+            return None
+        found = None
+        for message in self.reader.messages(channels=channels):
+            transform = json.loads(message.data)
+            if (transform.get("parent_frame_id"), transform.get("child_frame_id")) == (a, b):
+                found = transform
+        return None if found is None else _homogeneous(found["translation"],
+                                                       found["rotation"])
+
+
+def _homogeneous(translation: dict[str, float], rotation: dict[str, float]) -> np.ndarray:
+    """The 4x4 transform of a translation and a unit quaternion (x, y, z, w)."""
+    x, y, z, w = (rotation[k] for k in "xyzw")
+    matrix = np.eye(4)
+    matrix[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    matrix[:3, 3] = [translation[k] for k in "xyz"]
+    return matrix

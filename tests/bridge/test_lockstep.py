@@ -108,3 +108,31 @@ def test_a_member_that_dies_stops_the_run_loudly(peers: list[Peer]) -> None:
     b.kill()
     assert a.wait() != 0
     assert any("process b went away" in line for line in a.errors), a.errors
+
+
+async def test_a_call_taken_off_the_inbox_wakes_a_process_waiting_to_be_idle() -> None:
+    """A query that arrives just after a member's idleness check is served by a call that
+    may wait for a later instant (``getWait…``); taking it off the inbox must wake the
+    member, or it never reports idle, that instant is never granted, and the split run
+    stalls (what hung the test above under load)."""
+    import asyncio
+
+    from afa.bridge import Bridge, BridgeParameters
+    from afa.bridge.link import Inbox
+
+    bridge = Bridge(BridgeParameters())
+    bridge._queries = Inbox(asyncio.get_running_loop(), 8)
+    served: list[object] = []
+    bridge._spawn_query = served.append  # type: ignore[method-assign]  # the call runs on
+    serving = asyncio.ensure_future(bridge._serve_queries())
+    try:
+        await asyncio.sleep(0)  # the server waits for its inbox
+        bridge.changed.clear()
+        bridge._queries.push(("poll", "a getWait call"))
+        assert not bridge.idle()  # waiting in the inbox
+        for _ in range(3):  # the wake-up, then the server's turn
+            await asyncio.sleep(0)
+        assert served == ["a getWait call"] and bridge.idle()
+        assert bridge.changed.is_set()
+    finally:
+        serving.cancel()

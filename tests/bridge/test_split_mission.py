@@ -1,8 +1,16 @@
 """The Raptor split in two processes (``afa run CONFIG --process vehicle`` and ``...
 --process autonomy``) in lock-step virtual time drives the simulated mission to the same
-outcome as one process: distance, collisions, waypoints, the vehicle's final state, the
-pose error, and every event stream (per-name digests), with ModelServer in the second
-process consuming GPS and IMU from the first and its Pose stream crossing back."""
+outcome as one process:
+
+- the shipped split (sensing, Vehicle Control and ModelServer in ``vehicle``; maps,
+  planners and arbiter in ``autonomy``) drives a whole mission (the short-hop world) to
+  its end: every waypoint in order, no collision, the completion time and the distance
+  within 5 % of one process's (why not identical: docs/distributed.md);
+- with ModelServer moved to the second process, consuming GPS and IMU from the first and
+  its Pose stream crossing back, the first seconds are identical to one process:
+  distance, collisions, waypoints, the vehicle's final state, the pose error, and every
+  event stream (per-name digests).
+"""
 
 from __future__ import annotations
 
@@ -69,6 +77,52 @@ def test_the_split_raptor_drives_the_mission_as_one_process_does(
     assert split["bridge"]["lockstep"]["role"] == "master"
     assert other_half["bridge"]["lockstep"]["role"] == "follower"
     assert split["bridge"]["commands_refused"] == 0  # the arbiter may command: allowed
+
+
+#: A mission of 25 m and two waypoints, about 55 s of simulated driving.
+SHORT = "short-hop"
+#: How far the split's completion time and distance may be from one process's, as a
+#: fraction: FindPath's getPose polls cross the bridge at the instants ModelServer makes a
+#: new pose and read the one before it (lock-step keeps times, not the order of things at
+#: the same virtual instant in two processes; decision 0011), so the planner's votes and
+#: the track differ slightly. Measured on short-hop: 53.66 s against 54.66 s, 25.025 m
+#: both; the split repeats itself exactly from run to run.
+TOLERANCE = 0.05
+
+
+def test_the_shipped_split_completes_the_whole_mission_as_one_process_does(
+        tmp_path: Path, peers: list[Peer]) -> None:
+    port, other = free_port(), free_port()
+    world = ("--world", SHORT)
+    one = afa_run(RAPTOR, tmp_path / "one.json", *world)  # ends with its mission
+    vehicle = afa_run(RAPTOR, tmp_path / "vehicle.json", *world, "--process", "vehicle",
+                      "--listen", endpoint(port))
+    autonomy = afa_run(RAPTOR, tmp_path / "autonomy.json", *world, "--process", "autonomy",
+                       "--listen", endpoint(other), "--connect", endpoint(port))
+    peers += [one, vehicle, autonomy]
+    for peer in (one, vehicle, autonomy):
+        assert peer.wait(300) == 0, peer.errors[-5:]
+    alone = json.loads((tmp_path / "one.json").read_text())
+    split = json.loads((tmp_path / "vehicle.json").read_text())
+    other_half = json.loads((tmp_path / "autonomy.json").read_text())
+    for run in (alone, split):  # waypoints are counted only in their order
+        assert run["mission_complete"] and run["collisions"] == []
+        assert run["waypoints_reached"] == run["waypoints_total"] == 2
+    assert split["mission_complete_time_s"] == pytest.approx(
+        alone["mission_complete_time_s"], rel=TOLERANCE)
+    assert split["mission_distance_m"] == pytest.approx(alone["mission_distance_m"],
+                                                        rel=TOLERANCE)
+    # the two halves ended together, at the mission's end, and ran where configured
+    assert other_half["sim_time_s"] == split["sim_time_s"]
+    assert {"FindPathService", "arcArbiter", "GlobalMapService"} <= set(
+        other_half["components"])
+    assert {"modelServer", "RaptorService"} <= set(split["components"])
+    assert not {"FindPathService", "arcArbiter"} & set(split["components"])
+    # what crossed: poses one way, the arbiter's commands the other, none refused
+    assert other_half["bridge"]["imported"]["Pose"] == split["events"]["Pose"]
+    assert split["bridge"]["imported"]["ArcDecision"] == other_half["events"]["ArcDecision"]
+    assert split["bridge"]["calls_served"] > 0 and split["bridge"]["commands_refused"] == 0
+    assert split["bridge"]["lockstep"]["role"] == "master"
 
 
 @pytest.mark.parametrize("group", ["vehicle", "autonomy"])

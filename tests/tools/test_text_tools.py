@@ -12,7 +12,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +20,7 @@ import pytest
 
 from tests.bridge.conftest import ROOT, Peer, environment
 from tests.bridge.parts import endpoint, free_port
+from tests.tools.conftest import Tool
 
 pytest.importorskip("zenoh", reason="the tools need the extra afa[zenoh]")
 
@@ -62,30 +63,6 @@ def afa(*args: str, check: bool = True, timeout: float = 60,
     if check:
         assert result.returncode == 0, result.stderr
     return result
-
-
-Tool = Callable[..., "Ran"]
-
-
-class Ran:
-    def __init__(self, returncode: int, stdout: str, stderr: str) -> None:
-        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
-
-
-@pytest.fixture
-def tool(capsys: pytest.CaptureFixture[str]) -> Callable[..., Ran]:
-    """``tool("names", ...)``: ``afa names ...`` in this process (afa.cli.main)."""
-    from afa.cli import main
-
-    def run(*args: str, check: bool = True) -> Ran:
-        capsys.readouterr()
-        code = main(list(args))
-        out, err = capsys.readouterr()
-        if check:
-            assert code == 0, err
-        return Ran(code, out, err)
-
-    return run
 
 
 def test_names_lists_the_registry_with_interfaces_owners_and_processes(
@@ -224,23 +201,9 @@ def test_tools_say_when_no_system_is_reachable(tool: Tool) -> None:
         assert f"no afa system is reachable at {nobody}" in result.stderr, args
 
 
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A recording (afa.log's Recorder) of a small system: a laser publishing two points
-    ten times a second and a client that polled ModelServer's getTransformation once."""
-    pytest.importorskip("afa.log.recorder", reason="the log mode needs afa.log")
-    import asyncio
-
-    from tests.tools.recorded import record
-
-    path = tmp_path_factory.mktemp("log") / "small.mcap"
-    asyncio.run(record(path))
-    return path
-
-
 def test_echo_hz_and_names_read_a_recording(recording: Path, tool: Tool) -> None:
     lines = tool("echo", "Laser11", "--log", str(recording)).stdout.splitlines()
-    assert len(lines) == 20 and "Raptor/Laser11 from laser: Range3dSeqEventIDL" in lines[0]
+    assert len(lines) == 34 and "Raptor/Laser11 from laser: Range3dSeqEventIDL" in lines[0]
     record = json.loads(tool("echo", "Laser11", "--json", "--count", "1", "--log",
                              str(recording)).stdout)
     assert record["body_type"] == "idl.range.Range3dSeqEventIDL@1"
@@ -255,7 +218,7 @@ def test_sensor3d_stream_reads_a_recording_through_its_recorded_transformation(
     lines = tool("sensor3d", "stream", "Laser11", "--count", "1", "--log",
                  str(recording)).stdout.splitlines()
     assert lines[0].startswith("# Laser11 t=") and "-> Raptor:RearAxleCenter: 2 points" in lines[0]
-    assert lines[1:] == ["1.500 0.000 1.000", "2.500 0.000 1.000"]  # through the recorded pose
+    assert lines[1:] == ["1.500 0.000 1.000", "2.600 0.000 1.000"]  # through the recorded pose
     missing = tool("sensor3d", "stream", "Laser11", "--frame", "Raptor:Nowhere", "--log",
                    str(recording), check=False)
     assert missing.returncode == 1 and "no recorded getTransformation" in missing.stderr
