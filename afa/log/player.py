@@ -299,9 +299,18 @@ class Player:
 
         self.sources: list[str] = []
         self.rerun: list[Component[Any]] = []
+        def inputs_of(component: Component[Any]) -> list[Any]:
+            return [p for p in component.ports() if p.direction.value == "subscribes"]
+
+        # an input is covered if recorded, or made by a processing component (one that
+        # re-runs too): a short recording may end before the first Traverse map
+        made = {p.name for c in components if inputs_of(c) for p in c.ports()
+                if p.direction.value == "publishes"}
         for component in components:
-            inputs = [p for p in component.ports() if p.direction.value == "subscribes"]
+            inputs = inputs_of(component)
             covered = [any(fnmatchcase(name, p.name) for name in events) for p in inputs]
+            if any(covered):
+                covered = [c or p.name in made for c, p in zip(covered, inputs, strict=True)]
             if not inputs or not any(covered):
                 self.sources.append(component.name)
                 continue
@@ -367,6 +376,8 @@ class Player:
         self._produced: dict[tuple[str, ...], deque[tuple[float, Any]]] = {}
         self._watch: list[Any] = []
         self._rerun_names = rerun_names
+        self._inputs = {c.name: [p.name for p in c.ports() if p.direction.value == "subscribes"]
+                        for c in self.rerun}
         self.reissued = 0  #: recorded calls re-issued to re-run servers
         self._rerun_servers = {
             join_name(self.robot, str(port.get("name"))) for port in reader.catalog()
@@ -579,7 +590,7 @@ class Player:
                 return
             self.position = stamp
             for k, (message, header) in enumerate(group):
-                if header is not None and header[4] in self._rerun_names and any(
+                if self._timed(header, group[:k]) and any(
                         h is None or h[4] not in self._rerun_names for _, h in group[k:]):
                     self.system.tasks.spawn(
                         self._after(group[k:], latest), owner="player instant")
@@ -589,6 +600,16 @@ class Player:
         except Exception as exc:  # never into the clock's driver: fail the replay
             self.failure = exc
             self.finished.set()
+
+    def _timed(self, header: tuple[str, str, float, int, str] | None,
+               before: list[tuple[LogMessage, Any]]) -> bool:
+        """Whether a recorded message is a re-run component's output that nothing earlier
+        at its instant can have caused (none of the events before it is one it
+        subscribes to): its own timer made it, and inputs recorded after it must wait."""
+        if header is None or header[4] not in self._rerun_names:
+            return False
+        inputs = self._inputs.get(header[4], ())
+        return not any(h is not None and _matches(h[1], inputs) for _, h in before)
 
     async def _after(self, rest: list[tuple[LogMessage, Any]], latest: float) -> None:
         """The rest of an instant, at the last time showing its stamp: woken after the
