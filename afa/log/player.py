@@ -28,9 +28,10 @@ value of every topic before the target), :attr:`speed`.
 from __future__ import annotations
 
 import asyncio
-import math
+import functools
 import json
 import logging
+import math
 import types
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
@@ -448,7 +449,8 @@ class Player:
         for name, servant in self.servants.items():
             system.registry.rebind(name, servant, owner=self)
         seeking = self.first > self.reader.start
-        if seeking:
+        if seeking:  # the clock shows the start at once (paused, a step is one second)
+            self._seek_state(self.first)
             await self._launch_all()
             self._republish(self.first)
         else:
@@ -517,8 +519,8 @@ class Player:
                     self._upcoming.append(stamp)
                     handles = [h for h in handles if not h.cancelled]
                     span = clock.span(stamp, stamp - self._base)
-                    handles.append(clock.call_at(span[0], lambda s=stamp, g=group, t=span[1]:
-                                                 self._at(s, g, t)))
+                    handles.append(clock.call_at(
+                        span[0], functools.partial(self._at, stamp, group, span[1])))
                     last = stamp
                 if last is not None:
                     await clock.sleep_until(last - self._base)
