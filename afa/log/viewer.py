@@ -294,13 +294,27 @@ def arc_votes_json(votes: ArcVoteIDL) -> bytes:
     times faster: each arc's points are encoded once per curvature (a behaviour votes on
     the same curvatures every time), the hottest part of recording the viewer channels
     (an ArcVote every few milliseconds)."""
+    vetoes, values, certainties = (votes.veto.tolist(), votes.vote.tolist(),
+                                   votes.certainty.tolist())
+    if not all(map(math.isfinite, values + certainties)):
+        return dumps(arc_votes(votes))  # refuses them, as for any other message
     lines = ",".join(
-        f'{_LINE_HEAD},"points":{_arc_json(curvature)},'
-        f'"color":{_compact(_vote_color(votes, k))},"colors":[],"indices":[]}}'
+        f'{_LINE_HEAD},"points":{_arc_json(curvature)},"color":'
+        f'{_VETOED if vetoes[k] else _color_json(values[k], certainties[k])}'
+        ',"colors":[],"indices":[]}'
         for k, curvature in enumerate(votes.curvatures.tolist()))
     # "lines":[] cannot occur inside a JSON string (its quotes would be escaped)
     return _compact(_votes_scene(votes, [])).replace('"lines":[]', f'"lines":[{lines}]',
                                                      1).encode()
+
+
+_VETOED = '{"r":1.0,"g":0.0,"b":0.0,"a":1.0}'
+
+
+def _color_json(vote: float, certainty: float) -> str:
+    """:func:`_vote_color` as JSON (json writes a finite float as its repr)."""
+    return (f'{{"r":{float(1.0 - vote)!r},"g":{float(vote)!r},"b":0.2,'
+            f'"a":{float(0.25 + 0.75 * certainty)!r}}}')
 
 
 def _compact(value: Any) -> str:
