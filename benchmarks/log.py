@@ -34,13 +34,13 @@ from components.simulation import RaptorSimulation  # noqa: E402
 CONFIG = ROOT / "configs" / "raptor.xml"
 
 
-async def simulate(seconds: float, record: Path | None = None, **options: object) -> float:
+async def simulate(seconds: float, record: Path | None = None, **options: Any) -> float:
     """Wall seconds of a simulated run (optionally recorded)."""
     return (await simulate_timed(seconds, record, **options))[0]
 
 
 async def simulate_timed(seconds: float, record: Path | None = None,
-                         **options: object) -> tuple[float, float]:
+                         **options: Any) -> tuple[float, float]:
     """(wall, CPU) seconds of a simulated run (optionally recorded); CPU time is the
     figure to trust on a shared machine."""
     clock = VirtualClock()
