@@ -10,6 +10,7 @@ import argparse
 import asyncio
 import contextlib
 import json
+import os
 import sys
 import time
 from collections.abc import AsyncIterator, Iterator
@@ -315,51 +316,65 @@ KEYS = {
 }
 
 
+def press(player: Any, key: str) -> Any:
+    """Apply one key of KEYS to ``player``; returns the awaitable to run for keys that
+    move the replay (step, seek), else None."""
+    if key == " ":
+        player.resume() if player.paused else player.pause()
+    elif key == ".":
+        return player.step()
+    elif key == "s":
+        return player.step_time(1.0)
+    elif key in ("[", "]"):
+        return player.seek(max(0.0, player.elapsed + (10 if key == "]" else -10)))
+    elif key == "+":
+        player.speed = (player.speed or 64.0) * 2
+    elif key == "-":
+        player.speed = (player.speed or 64.0) / 2
+    elif key == "m":
+        player.speed = None
+    elif key == "1":
+        player.speed = 1.0
+    elif key == "q":
+        player.finished.set()
+    return None
+
+
+async def _obey(player: Any, keys: asyncio.Queue[str]) -> None:
+    """Keys one at a time, each step or seek finished before the next key (a seek must
+    not race a step), then the status line."""
+    while True:
+        key = await keys.get()
+        action = press(player, key)
+        if action is not None:
+            await action
+        speed = "max" if player.speed is None else f"x{player.speed:g}"
+        print(f"\r[{'paused' if player.paused else 'playing'} {speed} "
+              f"t={player.elapsed:8.2f} s]", end="", file=sys.stderr, flush=True)
+
+
 @contextlib.contextmanager
 def _keyboard(player: Any) -> Iterator[None]:
     """Keys on a terminal (see KEYS); nothing when standard input is not one."""
-    if not sys.stdin.isatty():
+    stdin = sys.stdin
+    if not stdin.isatty():
         yield
         return
     import termios
     import tty
 
-    fd = sys.stdin.fileno()
+    fd = stdin.fileno()
     saved = termios.tcgetattr(fd)
     loop = asyncio.get_running_loop()
-    actions: list[Any] = []
-
-    def act(key: str) -> None:
-        if key == " ":
-            player.resume() if player.paused else player.pause()
-        elif key == ".":
-            actions.append(player.step())
-        elif key == "s":
-            actions.append(player.step_time(1.0))
-        elif key in "[]":
-            actions.append(player.seek(max(0.0, player.elapsed + (10 if key == "]" else -10))))
-        elif key == "+":
-            player.speed = (player.speed or 64.0) * 2
-        elif key == "-":
-            player.speed = (player.speed or 64.0) / 2
-        elif key == "m":
-            player.speed = None
-        elif key == "1":
-            player.speed = 1.0
-        elif key == "q":
-            player.finished.set()
-        speed = "max" if player.speed is None else f"x{player.speed:g}"
-        print(f"\r[{'paused' if player.paused else 'playing'} {speed} "
-              f"t={player.elapsed:8.2f} s]", end="", file=sys.stderr, flush=True)
+    keys: asyncio.Queue[str] = asyncio.Queue()
 
     def on_key() -> None:
-        key = sys.stdin.read(1)
-        act(key)
-        while actions:
-            player.system.tasks.spawn(actions.pop(0), owner="replay keyboard")
+        for key in os.read(fd, 64).decode(errors="replace"):
+            keys.put_nowait(key)
 
     print("keys: " + ", ".join(f"{k!r} {v}" for k, v in KEYS.items()), file=sys.stderr)
-    tty.setcbreak(fd)
+    tty.setcbreak(fd, termios.TCSANOW)  # TCSAFLUSH would drop keys typed ahead
+    player.system.tasks.spawn(_obey(player, keys), owner="replay keyboard")
     loop.add_reader(fd, on_key)
     try:
         yield

@@ -28,17 +28,19 @@ value of every topic before the target), :attr:`speed`.
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import logging
+import math
 import types
 from collections import deque
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from fnmatch import fnmatchcase
 from pathlib import Path
 from typing import Any, Union, get_args, get_origin
 
-from afa.clock import TIME_TOLERANCE, ScaledClock, VirtualClock
+from afa.clock import TIME_TOLERANCE, VirtualClock
 from afa.component import Component, State
 from afa.errors import AfaError, ConfigError, EDevIO, InterfaceError
 from afa.events import Overflow, peek_envelope
@@ -46,7 +48,15 @@ from afa.log import format as fmt
 from afa.log.check import CheckReport, Divergence, first_difference
 from afa.log.reader import LogChannel, LogMessage, LogReader
 from afa.naming import join_name
-from afa.polling import LatestSlot, PollError, PollRecord, decode_arguments, decode_error
+from afa.polling import (
+    LatestSlot,
+    LocalInvoker,
+    PollError,
+    PollRecord,
+    decode_arguments,
+    decode_error,
+    proxy_for,
+)
 from afa.polling import decode_result as decode_poll_result
 from afa.system import System
 from idl import wire
@@ -56,6 +66,12 @@ __all__ = ["Player", "ReplayServant", "known_interfaces", "recorded_servants",
            "check"]
 
 log = logging.getLogger("afa.log")
+
+#: How far ahead (s) the player schedules a recorded instant. The clock runs the
+#: callbacks of one instant in the order they were scheduled, so scheduling early puts
+#: the recorded inputs before the timers the re-run components set for that instant
+#: (their periods are shorter than this), as the recorded sources' were.
+LOOKAHEAD = 2.0
 
 
 def known_interfaces() -> dict[str, type[Interface]]:
@@ -216,6 +232,47 @@ def recorded_servants(reader: LogReader, robot: str, clock: Any, decode: Any,
     return servants
 
 
+class ReplayClock(VirtualClock):
+    """The replay's clock: a :class:`VirtualClock` (paced when ``pace`` is set) that can
+    say when it first shows a recorded stamp.
+
+    A recorded stamp is a float near 1e9 s (an ulp is 2.4e-7 s), the rounded sum of the
+    recorded clock's start and monotonic time: ``stamp - start`` is not the monotonic
+    instant the recorded run had but one of the few floats whose stamp rounds to it. The
+    player delivers a recorded instant at the *earliest* of them (:meth:`earliest`), so
+    that its inputs come before the re-run timers due at that stamp, as the recorded
+    sources' did, and what is made from them carries the recorded stamp.
+    """
+
+    def __init__(self, start: float, *, auto_advance: bool, pace: float | None) -> None:
+        super().__init__(start, auto_advance=auto_advance, pace=pace)
+
+    def stamp_at(self, monotonic: float) -> float:
+        """The stamp :meth:`now` gives at ``monotonic`` (the same float sum)."""
+        return self._start + monotonic + self._wall_offset
+
+    def span(self, stamp: float, guess: float) -> tuple[float, float]:
+        """The least and the greatest monotonic time (near ``guess``) whose stamp is
+        ``stamp``; ``(guess, guess)`` if no time shows exactly ``stamp``."""
+        if self.stamp_at(guess) != stamp:
+            return guess, guess
+        reach = 4 * (math.ulp(stamp) + math.ulp(guess))
+        return self._edge(stamp, guess, guess - reach), self._edge(stamp, guess, guess + reach)
+
+    def _edge(self, stamp: float, inside: float, outside: float) -> float:
+        """Bisect between a time showing ``stamp`` and one that does not."""
+        if self.stamp_at(outside) == stamp:
+            return inside
+        while True:
+            middle = (inside + outside) / 2
+            if middle in (inside, outside):
+                return inside
+            if self.stamp_at(middle) == stamp:
+                inside = middle
+            else:
+                outside = middle
+
+
 class Player:
     """A recording replayed into the components of ``config`` (see the module docstring).
 
@@ -273,9 +330,9 @@ class Player:
             self.start_monotonic = float(info.get("start_monotonic", "0"))
         except ValueError:
             self.start_monotonic = 0.0
-        self.clock: VirtualClock = (VirtualClock(start=self.origin, auto_advance=not paused)
-                                    if speed is None or check else
-                                    ScaledClock(self.origin, speed=speed, paused=paused))
+        self.clock: ReplayClock = ReplayClock(
+            self.origin, auto_advance=not paused,
+            pace=None if speed is None or check else speed)
         self._base = self.origin  # the stamp at monotonic 0 (moves with seeks)
 
         events = {c.event: c for c in reader.topics(fmt.EVENT)}
@@ -291,9 +348,18 @@ class Player:
 
         self.sources: list[str] = []
         self.rerun: list[Component[Any]] = []
+        def inputs_of(component: Component[Any]) -> list[Any]:
+            return [p for p in component.ports() if p.direction.value == "subscribes"]
+
+        # an input is covered if recorded, or made by a processing component (one that
+        # re-runs too): a short recording may end before the first Traverse map
+        made = {p.name for c in components if inputs_of(c) for p in c.ports()
+                if p.direction.value == "publishes"}
         for component in components:
-            inputs = [p for p in component.ports() if p.direction.value == "subscribes"]
+            inputs = inputs_of(component)
             covered = [any(fnmatchcase(name, p.name) for name in events) for p in inputs]
+            if any(covered):
+                covered = [c or p.name in made for c, p in zip(covered, inputs, strict=True)]
             if not inputs or not any(covered):
                 self.sources.append(component.name)
                 continue
@@ -353,11 +419,19 @@ class Player:
                                   sorted({c.event for c in self.replayed.values()}),
                                   unchecked=self.unchecked if check else [])
         self._feeder: asyncio.Task[None] | None = None
-        self._next_stamp: float | None = None
+        self._upcoming: deque[float] = deque()  # stamps scheduled, not yet reached
+        self.failure: Exception | None = None  #: what stopped the replay, if anything
         self._expected: dict[tuple[str, ...], deque[tuple[float, Any]]] = {}
         self._produced: dict[tuple[str, ...], deque[tuple[float, Any]]] = {}
         self._watch: list[Any] = []
         self._rerun_names = rerun_names
+        self._inputs = {c.name: [p.name for p in c.ports() if p.direction.value == "subscribes"]
+                        for c in self.rerun}
+        self.reissued = 0  #: recorded calls re-issued to re-run servers
+        self._rerun_servers = {
+            join_name(self.robot, str(port.get("name"))) for port in reader.catalog()
+            if port.get("direction") == "serves" and port.get("component") in rerun_names}
+        self._calls: asyncio.Queue[fmt.PollCallIDL] = asyncio.Queue()
         self._listeners: dict[str, list[ReplayServant]] = {}
         for servant in self.servants.values():
             for event_name in set(servant._by_type.values()):
@@ -402,12 +476,14 @@ class Player:
         for name, servant in self.servants.items():
             system.registry.rebind(name, servant, owner=self)
         seeking = self.first > self.reader.start
-        if seeking:
+        if seeking:  # the clock shows the start at once (paused, a step is one second)
+            self._seek_state(self.first)
             await self._launch_all()
             self._republish(self.first)
         else:
             system.tasks.spawn(self._start_components(), owner="player schedule")
         self._feeder = system.tasks.spawn(self._feed(self.first), owner="player")
+        system.tasks.spawn(self._reissue(), owner="player calls")
 
     async def stop(self) -> None:
         try:
@@ -428,6 +504,8 @@ class Player:
                 task.cancel()
             for task in done:
                 task.result()
+        if self.failure is not None:
+            raise self.failure
 
     async def _start_components(self) -> None:
         clock = self.clock
@@ -454,44 +532,121 @@ class Player:
         return set(self.replayed) | set(self.polls) | set(self.outputs)
 
     async def _feed(self, first: int) -> None:
+        """Read ahead and schedule each recorded instant (every message of one stamp) as
+        a clock callback ``LOOKAHEAD`` seconds before it is due, then wait for the end."""
         clock = self.clock
-        reader = self.reader
-        while True:
-            current: float | None = None
-            for message in reader.messages(start=first, end=self.last,
-                                           channels=self._channels()):
-                header = None
-                if message.channel.kind == fmt.EVENT:
-                    header = self._header(message)
-                    if header is None:
-                        continue
-                stamp = header[2] if header is not None else message.time
-                if current is None or stamp > current:
-                    self._next_stamp = stamp
-                    await clock.sleep_until(stamp - self._base)
-                    current = stamp
-                    if self.check_mode and self._verify(before=stamp):
-                        self.finished.set()
+        handles: list[Any] = []
+        try:
+            while True:
+                last: float | None = None
+                for stamp, group in self._instants(first):
+                    await clock.sleep_until(stamp - LOOKAHEAD - self._base)
+                    if self.finished.is_set():
                         return
-                self.position = stamp
+                    self._upcoming.append(stamp)
+                    handles = [h for h in handles if not h.cancelled]
+                    span = clock.span(stamp, stamp - self._base)
+                    handles.append(clock.call_at(
+                        span[0], functools.partial(self._at, stamp, group, span[1])))
+                    last = stamp
+                if last is not None:
+                    await clock.sleep_until(last - self._base)
+                if self.finished.is_set():
+                    return
+                if self.check_mode:
+                    if isinstance(clock, VirtualClock):
+                        # the last stamp rebuilt as monotonic time may fall a rounding
+                        # short of a timer the recorded run fired at the same instant
+                        await clock.advance(TIME_TOLERANCE)
+                        await clock.settle()
+                    self._verify(before=None)
+                    self.finished.set()
+                    return
+                if not self.loop:
+                    self.finished.set()
+                    return
+                first = self.first
+                self._seek_state(first)
+                self._republish(first)
+        finally:
+            for handle in handles:
+                handle.cancel()
+            self._upcoming.clear()
+
+    def _instants(self, first: int) -> Iterator[tuple[float, list[tuple[LogMessage, Any]]]]:
+        """The recorded messages from ``first`` grouped by stamp, each group in recorded
+        sequence order: at one instant the order of events matters (the arbiter decides
+        on every vote), and the file's order of equal times is not the publishing one."""
+        stamp: float | None = None
+        group: list[tuple[float, int, LogMessage, Any]] = []
+        for message in self.reader.messages(start=first, end=self.last,
+                                            channels=self._channels()):
+            header = None
+            if message.channel.kind == fmt.EVENT:
+                header = self._header(message)
+                if header is None:
+                    continue
+            at = header[2] if header is not None else message.time
+            if stamp is not None and at > stamp:
+                yield stamp, self._ordered(group)
+                group = []
+            if stamp is None or at > stamp:
+                stamp = at
+            # a poll carries no sequence: it keeps its place after the events before it
+            seq = header[3] if header is not None else (group[-1][1] if group else -1)
+            group.append((seq, len(group), message, header))
+        if stamp is not None:
+            yield stamp, self._ordered(group)
+
+    @staticmethod
+    def _ordered(group: list[tuple[float, int, LogMessage, Any]]
+                 ) -> list[tuple[LogMessage, Any]]:
+        return [(m, h) for _, _, m, h in sorted(group, key=lambda item: item[:2])]
+
+    def _at(self, stamp: float, group: list[tuple[LogMessage, Any]], latest: float) -> None:
+        """One recorded instant, run by the clock as it first shows ``stamp`` (before the
+        re-run's timers due at that stamp): compare what came before, then publish the
+        recorded messages up to the first output of a re-run component; those after it
+        (a GPS fix recorded after Pure Pursuit's timed vote) wait for the re-run's turn
+        at that stamp (:meth:`_after`)."""
+        if self._upcoming and self._upcoming[0] <= stamp:
+            self._upcoming.popleft()
+        if self.finished.is_set():
+            return
+        try:
+            if self.check_mode and self._verify(before=stamp):
+                self.finished.set()
+                return
+            self.position = stamp
+            for k, (message, header) in enumerate(group):
+                if self._timed(header, group[:k]) and any(
+                        h is None or h[4] not in self._rerun_names for _, h in group[k:]):
+                    self.system.tasks.spawn(
+                        self._after(group[k:], latest), owner="player instant")
+                    return
                 self.delivered += 1
                 self._deliver(message, header)
-            self._next_stamp = None
-            if self.check_mode:
-                if isinstance(clock, VirtualClock):
-                    # the last stamp rebuilt as monotonic time may fall a rounding
-                    # short of a timer the recorded run fired at the same instant
-                    await clock.advance(TIME_TOLERANCE)
-                    await clock.settle()
-                self._verify(before=None)
-                self.finished.set()
-                return
-            if not self.loop:
-                self.finished.set()
-                return
-            first = self.first
-            self._seek_state(first)
-            self._republish(first)
+        except Exception as exc:  # never into the clock's driver: fail the replay
+            self.failure = exc
+            self.finished.set()
+
+    def _timed(self, header: tuple[str, str, float, int, str] | None,
+               before: list[tuple[LogMessage, Any]]) -> bool:
+        """Whether a recorded message is a re-run component's output that nothing earlier
+        at its instant can have caused (none of the events before it is one it
+        subscribes to): its own timer made it, and inputs recorded after it must wait."""
+        if header is None or header[4] not in self._rerun_names:
+            return False
+        inputs = self._inputs.get(header[4], ())
+        return not any(h is not None and _matches(h[1], inputs) for _, h in before)
+
+    async def _after(self, rest: list[tuple[LogMessage, Any]], latest: float) -> None:
+        """The rest of an instant, at the last time showing its stamp: woken after the
+        re-run tasks its timers woke then."""
+        await self.clock.sleep_until(latest)
+        for message, header in rest:
+            self.delivered += 1
+            self._deliver(message, header)
 
     def _header(self, message: LogMessage) -> tuple[str, str, float, int, str] | None:
         if message.channel.id in self.reader._undecodable:
@@ -532,9 +687,42 @@ class Player:
         if self.check_mode and record.caller in self._pending_or_rerun():
             self._expected.setdefault(("poll", record.caller, record.server, record.method),
                                       deque()).append((message.time, record))
+        if self._reissues(record):
+            self._calls.put_nowait(record)
         servant = self.servants.get(record.server)
         if servant is not None:
             servant.replay(record)
+
+    def _reissues(self, record: fmt.PollCallIDL) -> bool:
+        """A recorded command (not a ``get…`` query, which changes nothing) from a caller
+        that does not re-run (the control station, a source) to a server that does: the
+        re-run server must hear it again (waypoints, patrol mode, arbiter on)."""
+        return (record.server in self._rerun_servers
+                and record.caller not in self._rerun_names
+                and not record.method.startswith("get"))
+
+    async def _reissue(self) -> None:
+        """Make the queued recorded commands, one after the other in recorded order, at
+        the instant the feeder reached them; their outcome is the re-run server's."""
+        interfaces = known_interfaces()
+        registry = self.system.registry
+        while True:
+            record = await self._calls.get()
+            interface = interfaces.get(record.interface)
+            if interface is None:
+                self.reader.problems.append(
+                    f"{self.reader.path}: {record.server}.{record.method} is on "
+                    f"{record.interface}, which this afa does not know: not re-issued")
+                continue
+            try:
+                arguments = decode_arguments(interface, record.method, bytes(record.arguments))
+                await registry.wait_resolve(record.server, interface.call_timeout)
+                proxy = proxy_for(interface, LocalInvoker(registry, record.server, interface),
+                                  middleware=self.system.polls.middleware)
+                await getattr(proxy, record.method)(**arguments)
+            except AfaError as exc:  # as the recorded caller, the player carries on
+                log.info("re-issued %s.%s: %s", record.server, record.method, exc)
+            self.reissued += 1
 
     # -- controls ------------------------------------------------------------------------
     @property
@@ -563,9 +751,9 @@ class Player:
 
     async def step(self) -> None:
         """Publish the next message (works paused: the clock moves just to its time)."""
-        if self._next_stamp is None:  # the feeder has not reached its first wait yet
+        if not self._upcoming:  # the feeder has not scheduled anything yet
             await self.clock.settle()
-        target = self._next_stamp
+        target = self._upcoming[0] if self._upcoming else None
         if target is None:
             return
         await self.clock.advance(max(0.0, target - (self._base + self.clock.monotonic())))

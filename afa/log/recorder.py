@@ -282,7 +282,7 @@ class Recorder:
     # -- viewer channels ---------------------------------------------------------------------
     def _view(self, event: Event, nanoseconds: int) -> None:
         try:
-            messages = self._viewer.convert(event.type, event.origin, event.body)
+            messages = self._viewer.encode(event.type, event.origin, event.body)
         except Exception:  # a viewer channel must never cost the recording
             log.exception("viewer conversion of %s failed (skipped)", event.type)
             return
@@ -298,7 +298,7 @@ class Recorder:
                 self._system.clock.monotonic() - self._static_written_at >= STATIC_TF_PERIOD):
             self._write_static_tf(nanoseconds)
 
-    def _write_json(self, topic: str, schema_name: str, message: dict[str, Any],
+    def _write_json(self, topic: str, schema_name: str, message: dict[str, Any] | bytes,
                     nanoseconds: int) -> None:
         key = ("viewer", topic, schema_name)
         channel = self._channels.get(key)
@@ -309,7 +309,8 @@ class Recorder:
                     schema_name, fmt.SCHEMA_ENCODING, json.dumps(SCHEMAS[schema_name]).encode())
             channel = self._channels[key] = self._writer.register_channel(
                 topic, fmt.JSON_ENCODING, schema, {fmt.KIND: fmt.VIEWER})
-        self._writer.add_message(channel, nanoseconds, dumps(message), nanoseconds)
+        data = message if isinstance(message, bytes) else dumps(message)
+        self._writer.add_message(channel, nanoseconds, data, nanoseconds)
         self.viewer_written += 1
 
     def _static_tf_later(self) -> None:

@@ -27,6 +27,7 @@ points are drawn once, not once per form.
 from __future__ import annotations
 
 import base64
+import functools
 import json
 import math
 from collections.abc import Callable, Iterable
@@ -250,21 +251,24 @@ def _arc(curvature: float) -> list[dict[str, float]]:
     return points
 
 
-def arc_votes(votes: ArcVoteIDL) -> dict[str, Any]:
-    """``foxglove.SceneUpdate``: one entity per behaviour (replacing its last one), an arc
-    per candidate curvature in the vehicle frame: red when vetoed, else green by vote and
-    opaque by certainty."""
-    lines = []
-    for k, curvature in enumerate(votes.curvatures):
-        if votes.veto[k]:
-            color = {"r": 1.0, "g": 0.0, "b": 0.0, "a": 1.0}
-        else:
-            vote = float(votes.vote[k])
-            color = {"r": 1.0 - vote, "g": vote, "b": 0.2,
-                     "a": 0.25 + 0.75 * float(votes.certainty[k])}
-        lines.append({"type": _LINE_STRIP, "pose": _IDENTITY_POSE, "thickness": 2.0,
-                      "scale_invariant": True, "points": _arc(float(curvature)),
-                      "color": color, "colors": [], "indices": []})
+@functools.lru_cache(maxsize=4096)
+def _arc_json(curvature: float) -> str:
+    """An arc's points as JSON: a behaviour votes on the same few curvatures each time."""
+    return json.dumps(_arc(curvature), separators=(",", ":"), allow_nan=False)
+
+
+_LINE_HEAD = json.dumps({"type": _LINE_STRIP, "pose": _IDENTITY_POSE, "thickness": 2.0,
+                         "scale_invariant": True}, separators=(",", ":"))[:-1]
+
+
+def _vote_color(votes: ArcVoteIDL, k: int) -> dict[str, float]:
+    if votes.veto[k]:
+        return {"r": 1.0, "g": 0.0, "b": 0.0, "a": 1.0}
+    vote = float(votes.vote[k])
+    return {"r": 1.0 - vote, "g": vote, "b": 0.2, "a": 0.25 + 0.75 * float(votes.certainty[k])}
+
+
+def _votes_scene(votes: ArcVoteIDL, lines: list[Any]) -> dict[str, Any]:
     entity = {"timestamp": _time(votes.time), "frame_id": VEHICLE_FRAME,
               "id": votes.behaviour or "votes", "lifetime": {"sec": 0, "nsec": 0},
               "frame_locked": True,
@@ -272,6 +276,49 @@ def arc_votes(votes: ArcVoteIDL) -> dict[str, Any]:
               "arrows": [], "cubes": [], "spheres": [], "cylinders": [], "lines": lines,
               "triangles": [], "texts": [], "models": []}
     return {"deletions": [], "entities": [entity]}
+
+
+def arc_votes(votes: ArcVoteIDL) -> dict[str, Any]:
+    """``foxglove.SceneUpdate``: one entity per behaviour (replacing its last one), an arc
+    per candidate curvature in the vehicle frame: red when vetoed, else green by vote and
+    opaque by certainty."""
+    lines = [{"type": _LINE_STRIP, "pose": _IDENTITY_POSE, "thickness": 2.0,
+              "scale_invariant": True, "points": _arc(float(curvature)),
+              "color": _vote_color(votes, k), "colors": [], "indices": []}
+             for k, curvature in enumerate(votes.curvatures)]
+    return _votes_scene(votes, lines)
+
+
+def arc_votes_json(votes: ArcVoteIDL) -> bytes:
+    """``dumps(arc_votes(votes))``, the same document (a test compares them) made several
+    times faster: each arc's points are encoded once per curvature (a behaviour votes on
+    the same curvatures every time), the hottest part of recording the viewer channels
+    (an ArcVote every few milliseconds)."""
+    vetoes, values, certainties = (votes.veto.tolist(), votes.vote.tolist(),
+                                   votes.certainty.tolist())
+    if not all(map(math.isfinite, values + certainties)):
+        return dumps(arc_votes(votes))  # refuses them, as for any other message
+    lines = ",".join(
+        f'{_LINE_HEAD},"points":{_arc_json(curvature)},"color":'
+        f'{_VETOED if vetoes[k] else _color_json(values[k], certainties[k])}'
+        ',"colors":[],"indices":[]}'
+        for k, curvature in enumerate(votes.curvatures.tolist()))
+    # "lines":[] cannot occur inside a JSON string (its quotes would be escaped)
+    return _compact(_votes_scene(votes, [])).replace('"lines":[]', f'"lines":[{lines}]',
+                                                     1).encode()
+
+
+_VETOED = '{"r":1.0,"g":0.0,"b":0.0,"a":1.0}'
+
+
+def _color_json(vote: float, certainty: float) -> str:
+    """:func:`_vote_color` as JSON (json writes a finite float as its repr)."""
+    return (f'{{"r":{float(1.0 - vote)!r},"g":{float(vote)!r},"b":0.2,'
+            f'"a":{float(0.25 + 0.75 * certainty)!r}}}')
+
+
+def _compact(value: Any) -> str:
+    return json.dumps(value, separators=(",", ":"), allow_nan=False)
 
 
 _MAP_LAYERS: dict[type, tuple[str, ...]] = {
@@ -297,6 +344,14 @@ class ViewerConverter:
     def convert(self, event_type: str, origin: str, body: IDLModel) -> list[ViewerMessage]:
         handler = self._handlers.get(type(body))
         return [] if handler is None else handler(event_type, origin, body)
+
+    def encode(self, event_type: str, origin: str, body: IDLModel
+               ) -> list[tuple[str, str, bytes]]:
+        """:meth:`convert` as JSON bytes, what the recorder writes (votes the fast way)."""
+        if type(body) is ArcVoteIDL:
+            return [(viewer_topic(event_type), "foxglove.SceneUpdate", arc_votes_json(body))]
+        return [(topic, schema, dumps(message))
+                for topic, schema, message in self.convert(event_type, origin, body)]
 
     def _pose(self, event_type: str, origin: str, pose: PoseTransformIDL
               ) -> list[ViewerMessage]:

@@ -14,11 +14,11 @@ SIM_SECONDS = 12.0
 
 
 async def record_simulation(path: Path, config: Path = RAPTOR, seconds: float = SIM_SECONDS,
-                            **recorder_options):
+                            teleop: bool = True, **recorder_options):
     from components.simulation import RaptorSimulation
 
     clock = VirtualClock()
-    sim = RaptorSimulation.from_xml(config, clock=clock, seed=3, teleop=True)
+    sim = RaptorSimulation.from_xml(config, clock=clock, seed=3, teleop=teleop)
     recorder = Recorder(path, **recorder_options).attach(
         sim.system, metadata={"world": sim.world.name, "seed": 3})
     async with sim:
@@ -38,4 +38,16 @@ def recorded(tmp_path_factory) -> Path:
     """A simulated run (teleop drive) recorded with every channel."""
     path = tmp_path_factory.mktemp("log") / "sim.mcap"
     asyncio.run(record_simulation(path))
+    return path
+
+
+AUTONOMOUS_SECONDS = 6.0
+
+
+@pytest.fixture(scope="session")
+def recorded_autonomous(tmp_path_factory) -> Path:
+    """A simulated autonomous run (the control station sets the waypoints at about
+    1.3 s, then the arbiter drives), recorded with every channel."""
+    path = tmp_path_factory.mktemp("log") / "autonomous.mcap"
+    asyncio.run(record_simulation(path, seconds=AUTONOMOUS_SECONDS, teleop=False))
     return path

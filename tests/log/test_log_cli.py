@@ -4,6 +4,8 @@ LogNotify enabled from a configuration's Launcher."""
 import json
 from pathlib import Path
 
+import pytest
+
 from afa import registry
 from afa.cli import main
 from afa.log import LogReader
@@ -118,3 +120,63 @@ def test_log_notify_is_a_component_the_launcher_starts(tmp_path, capsys):
         assert {c.event for c in reader.topics(fmt.EVENT)} == {"Gps", "Pose"}
         assert reader.metadata["afa"]["recorded_by"] == "LogNotify"
         assert sum(reader.counts[c.id] for c in reader.topics(fmt.EVENT)) > 20
+
+
+def _replay_with_keys(recorded, keys, *options, monkeypatch, capsys):
+    """``afa replay`` through the CLI with ``keys`` typed on its terminal beforehand (a
+    pty: the real key path, no wall-clock waiting: the replay is paused until keys
+    move it, and ``q`` ends it). Returns (exit code, status lines, stdout)."""
+    import os
+    import pty
+    import re
+    import tty
+
+    master, slave = pty.openpty()
+    try:
+        tty.setcbreak(slave)  # typed ahead: a canonical terminal would hold them back
+        os.write(master, keys.encode())
+        with open(slave, closefd=False) as terminal:
+            monkeypatch.setattr("sys.stdin", terminal)
+            code = main(["replay", str(recorded), *options])
+    finally:
+        os.close(master)
+        os.close(slave)
+    out = capsys.readouterr()
+    status = re.findall(r"\[(\w+) (\S+) t=\s*([\d.]+) s\]", out.err)
+    return code, [(state, speed, float(t)) for state, speed, t in status], out.out
+
+
+def test_replay_keys_step_seek_and_speed(recorded, monkeypatch, capsys):
+    code, status, out = _replay_with_keys(recorded, ".s]+-m1q", "--paused",
+                                          monkeypatch=monkeypatch, capsys=capsys)
+    assert code == 0
+    assert [s[:2] for s in status] == [("paused", "x1"), ("paused", "x1"), ("paused", "x1"),
+                                       ("paused", "x2"), ("paused", "x1"),
+                                       ("paused", "max"), ("paused", "x1"), ("paused", "x1")]
+    step, second, seek = (t for _, _, t in status[:3])
+    assert step < 0.1  # one message: the first ones are at the start
+    assert 0.9 <= second <= 1.0  # the last message within one more second
+    assert seek == pytest.approx(second + 10, abs=0.01)  # ']' seeks 10 s on
+    assert "replayed" in out
+
+
+def test_replay_start_end_and_paused_by_keys(recorded, monkeypatch, capsys):
+    code, status, out = _replay_with_keys(recorded, "s s", "--paused", "--start", "4",
+                                          "--end", "6", monkeypatch=monkeypatch,
+                                          capsys=capsys)
+    assert code == 0
+    assert status[0][0] == "paused" and 4.9 <= status[0][2] <= 5.0  # from --start 4
+    assert status[1][0] == "playing"  # ' ' resumed; no 'q': the end stops it
+    assert all(t <= 6.0 for _, _, t in status)  # never past --end
+    assert "replayed 2.0 s" in out
+
+
+def test_replay_loop_starts_again_at_start(recorded, monkeypatch, capsys):
+    code, status, _ = _replay_with_keys(recorded, "sssq", "--paused", "--loop",
+                                        "--start", "1", "--end", "3",
+                                        monkeypatch=monkeypatch, capsys=capsys)
+    assert code == 0
+    times = [t for _, _, t in status]
+    assert 1.9 <= times[0] <= 2.0  # one second from --start 1
+    assert 1.0 <= times[1] < times[0]  # the next reached --end 3 and went back to 1
+    assert times[1] < times[2] <= 2.0  # and it goes on from there

@@ -68,6 +68,34 @@ async def test_a_changed_parameter_reports_where_it_diverges(recorded, variant):
     assert 0.0 < report.divergence.offset < 12.0
 
 
+async def test_an_autonomous_recording_re_runs_identically(recorded_autonomous):
+    """The control station's commands (waypoints, patrol mode, start, arbiter on) are
+    re-issued to the re-run servers, and same-stamp events keep their recorded order,
+    so the arbiter's decisions are reproduced score for score."""
+    from afa.log.reader import LogReader
+
+    report = await check(recorded_autonomous)
+    assert report.identical, report.text()
+    assert report.compared["/Raptor/ArcDecision"] >= 5
+    assert report.compared["/Raptor/ArcVote"] >= 50
+    with LogReader(recorded_autonomous) as reader:  # the decisions weigh real votes
+        scores = [reader.decode_event(m).body.scores
+                  for m in reader.messages(channels={c.id for c in reader.topics("event")
+                                                     if c.event == "ArcDecision"})]
+    assert any(len(set(s.round(9).tolist())) > 2 for s in scores)
+
+
+async def test_a_changed_arbiter_weight_diverges_on_the_decision(recorded_autonomous,
+                                                                 variant):
+    report = await check(recorded_autonomous, variant(
+        "weight", '"PursuitWeight" value="1"', '"PursuitWeight" value="2"'))
+    d = report.divergence
+    assert d is not None and d.topic == "/Raptor/ArcDecision" and d.origin == "arcArbiter"
+    assert d.field.startswith("scores[") and d.recorded != d.replayed
+    assert 1.0 < d.offset < 6.0
+    assert f"on /Raptor/ArcDecision from arcArbiter: {d.field}: recorded" in report.text()
+
+
 async def test_replay_at_max_speed_is_deterministic(recorded):
     async def digest():
         player = Player(recorded, speed=None)

@@ -2,6 +2,7 @@
 from synthetic map, vote, pose and point bodies."""
 
 import base64
+import json
 import math
 
 import numpy as np
@@ -108,6 +109,9 @@ def test_arc_votes_are_a_scene_update_of_arcs_in_the_vehicle_frame():
     straight, left = lines[1]["points"], lines[2]["points"]
     assert all(p["y"] == 0.0 for p in straight) and straight[-1]["x"] == pytest.approx(6.0)
     assert left[-1]["y"] > 0  # positive curvature turns left
+    # what the recorder writes is the same document, encoded the fast way
+    [(_, _, encoded)] = ViewerConverter().encode("ArcVote", "pp", votes)
+    assert json.loads(encoded) == json.loads(json.dumps(update))
 
 
 def test_a_pose_is_a_pose_in_frame_and_a_transform_and_points_a_point_cloud():
