@@ -298,6 +298,7 @@ class RaptorSimulation:
         self._steering_sign = 0
         self.steering_sign_changes = 0
         self._hazards: HazardField | None = None
+        self._outline_reach: float | None = None  # metres from the rear axle centre
         self._seeds = np.random.SeedSequence(seed)
         self._start = 0.0
         self._command = (0.0, 0.0, True)  # translation m/s, steering rad, brake
@@ -319,6 +320,8 @@ class RaptorSimulation:
         self.announce: Callable[[str, str], None] | None = None
         self._shared: dict[str, Any] = {}
         self._mounts: dict[str, np.ndarray] = {}
+        self._poses_of: VehicleState | None = None  # the state _poses were computed at
+        self._poses: dict[str, np.ndarray] = {}
         self._system: System | None = None
         self._observer: Any = None
         self._phase: Phase = "new"
@@ -335,7 +338,17 @@ class RaptorSimulation:
         return mount
 
     def frame_pose(self, frame: str) -> np.ndarray:
-        return self.state.transform() @ self.mount(frame)
+        # One product per frame and physics step, however many scans and frames read it
+        # (both lasers and the camera often sense between the same two steps); read-only,
+        # as it is shared.
+        state = self.state
+        if self._poses_of is not state:
+            self._poses_of, self._poses = state, {}
+        pose = self._poses.get(frame)
+        if pose is None:
+            pose = self._poses[frame] = state.transform() @ self.mount(frame)
+            pose.flags.writeable = False
+        return pose
 
     def rng(self) -> np.random.Generator:
         return np.random.default_rng(self._seeds.spawn(1)[0])
@@ -520,6 +533,11 @@ class RaptorSimulation:
             return
         state = self.state
         outline = self.vehicle.footprint(0.35)
+        if self._outline_reach is None:
+            self._outline_reach = float(np.hypot(outline[:, 0], outline[:, 1]).max())
+        if self._hazards.clearance_floor(state.east, state.north,
+                                         self._outline_reach) >= self.clearance:
+            return  # no point of the outline can come closer than the least so far
         c, sn = math.cos(state.yaw), math.sin(state.yaw)
         east = state.east + outline[:, 0] * c - outline[:, 1] * sn
         north = state.north + outline[:, 0] * sn + outline[:, 1] * c
