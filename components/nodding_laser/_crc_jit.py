@@ -24,7 +24,7 @@ def crc_kernel(data: np.ndarray) -> int:
     crc = 0
     previous = 0
     for k in range(data.shape[0]):
-        byte = np.int64(data[k])
+        byte = int(data[k])
         crc = (((crc << 1) & 0xFFFF) ^ 0x8005) if crc & 0x8000 else (crc << 1) & 0xFFFF
         crc ^= byte | (previous << 8)
         previous = byte
