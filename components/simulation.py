@@ -299,6 +299,8 @@ class RaptorSimulation:
         self.steering_sign_changes = 0
         self._hazards: HazardField | None = None
         self._outline_reach: float | None = None  # metres from the rear axle centre
+        # where the outline's clearance was last looked up: east, north, yaw, clearance
+        self._clearance_at: tuple[float, float, float, float] | None = None
         self._seeds = np.random.SeedSequence(seed)
         self._start = 0.0
         self._command = (0.0, 0.0, True)  # translation m/s, steering rad, brake
@@ -528,20 +530,30 @@ class RaptorSimulation:
                 self.finished.set()
 
     def _track_clearance(self) -> None:
-        """The least distance from the body's outline to a hazard so far."""
+        """The least distance from the body's outline to a hazard so far.
+
+        The outline's lookups are skipped while they cannot lower the least clearance:
+        since the last lookup no outline point has moved farther than the rear axle's
+        move plus the turn times the outline's reach, and a point's clearance changes by
+        at most its move plus :attr:`HazardField.sample_jump`."""
         if self._hazards is None:
             return
         state = self.state
         outline = self.vehicle.footprint(0.35)
         if self._outline_reach is None:
             self._outline_reach = float(np.hypot(outline[:, 0], outline[:, 1]).max())
-        if self._hazards.clearance_floor(state.east, state.north,
-                                         self._outline_reach) >= self.clearance:
-            return  # no point of the outline can come closer than the least so far
+        if self._clearance_at is not None:
+            east0, north0, yaw0, there = self._clearance_at
+            moved = (math.hypot(state.east - east0, state.north - north0)
+                     + abs(math.remainder(state.yaw - yaw0, math.tau)) * self._outline_reach)
+            if there - moved - self._hazards.sample_jump >= self.clearance:
+                return
         c, sn = math.cos(state.yaw), math.sin(state.yaw)
         east = state.east + outline[:, 0] * c - outline[:, 1] * sn
         north = state.north + outline[:, 0] * sn + outline[:, 1] * c
-        self.clearance = min(self.clearance, self._hazards.clearance(east, north))
+        here = self._hazards.clearance(east, north)
+        self._clearance_at = (state.east, state.north, state.yaw, here)
+        self.clearance = min(self.clearance, here)
 
     async def _mission(self) -> None:
         """The control station: waypoints to Pure Pursuit and the Global Map, patrol

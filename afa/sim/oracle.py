@@ -64,16 +64,13 @@ class HazardField:
         return max(0.0, float(self.distance.ravel().take(j * t.nx + i).min())
                    - 0.5 * t.resolution)
 
-    def clearance_floor(self, east: float, north: float, radius: float) -> float:
-        """A lower bound on :meth:`clearance` of any points within ``radius`` metres of
-        (east, north), from one sample: the distance field is 1-Lipschitz, and each
-        point's sample lies within half a diagonal of it. The simulation's least
-        clearance can skip the outline's lookups while this bound is not below it."""
-        t = self.terrain
-        i = min(max(round((east - t.east0) / t.resolution), 0), t.nx - 1)
-        j = min(max(round((north - t.north0) / t.resolution), 0), t.ny - 1)
-        slack = radius + (math.sqrt(2.0) + 0.5) * t.resolution + 1e-9
-        return max(0.0, float(self.distance[j, i]) - slack)
+    @property
+    def sample_jump(self) -> float:
+        """How much farther apart two points' samples can be than the points: half a
+        diagonal each (the nearest sample, clamped onto the grid), and a nanometre for
+        rounding. The distance field is 1-Lipschitz between samples, so a point's
+        :meth:`clearance` changes by at most its move plus this."""
+        return math.sqrt(2.0) * self.terrain.resolution + 1e-9
 
 
 @dataclass(frozen=True)
