@@ -298,6 +298,9 @@ class RaptorSimulation:
         self._steering_sign = 0
         self.steering_sign_changes = 0
         self._hazards: HazardField | None = None
+        self._outline_reach: float | None = None  # metres from the rear axle centre
+        # where the outline's clearance was last looked up: east, north, yaw, clearance
+        self._clearance_at: tuple[float, float, float, float] | None = None
         self._seeds = np.random.SeedSequence(seed)
         self._start = 0.0
         self._command = (0.0, 0.0, True)  # translation m/s, steering rad, brake
@@ -319,6 +322,8 @@ class RaptorSimulation:
         self.announce: Callable[[str, str], None] | None = None
         self._shared: dict[str, Any] = {}
         self._mounts: dict[str, np.ndarray] = {}
+        self._poses_of: VehicleState | None = None  # the state _poses were computed at
+        self._poses: dict[str, np.ndarray] = {}
         self._system: System | None = None
         self._observer: Any = None
         self._phase: Phase = "new"
@@ -335,7 +340,17 @@ class RaptorSimulation:
         return mount
 
     def frame_pose(self, frame: str) -> np.ndarray:
-        return self.state.transform() @ self.mount(frame)
+        # One product per frame and physics step, however many scans and frames read it
+        # (both lasers and the camera often sense between the same two steps); read-only,
+        # as it is shared.
+        state = self.state
+        if self._poses_of is not state:
+            self._poses_of, self._poses = state, {}
+        pose = self._poses.get(frame)
+        if pose is None:
+            pose = self._poses[frame] = state.transform() @ self.mount(frame)
+            pose.flags.writeable = False
+        return pose
 
     def rng(self) -> np.random.Generator:
         return np.random.default_rng(self._seeds.spawn(1)[0])
@@ -515,15 +530,30 @@ class RaptorSimulation:
                 self.finished.set()
 
     def _track_clearance(self) -> None:
-        """The least distance from the body's outline to a hazard so far."""
+        """The least distance from the body's outline to a hazard so far.
+
+        The outline's lookups are skipped while they cannot lower the least clearance:
+        since the last lookup no outline point has moved farther than the rear axle's
+        move plus the turn times the outline's reach, and a point's clearance changes by
+        at most its move plus :attr:`HazardField.sample_jump`."""
         if self._hazards is None:
             return
         state = self.state
         outline = self.vehicle.footprint(0.35)
+        if self._outline_reach is None:
+            self._outline_reach = float(np.hypot(outline[:, 0], outline[:, 1]).max())
+        if self._clearance_at is not None:
+            east0, north0, yaw0, there = self._clearance_at
+            moved = (math.hypot(state.east - east0, state.north - north0)
+                     + abs(math.remainder(state.yaw - yaw0, math.tau)) * self._outline_reach)
+            if there - moved - self._hazards.sample_jump >= self.clearance:
+                return
         c, sn = math.cos(state.yaw), math.sin(state.yaw)
         east = state.east + outline[:, 0] * c - outline[:, 1] * sn
         north = state.north + outline[:, 0] * sn + outline[:, 1] * c
-        self.clearance = min(self.clearance, self._hazards.clearance(east, north))
+        here = self._hazards.clearance(east, north)
+        self._clearance_at = (state.east, state.north, state.yaw, here)
+        self.clearance = min(self.clearance, here)
 
     async def _mission(self) -> None:
         """The control station: waypoints to Pure Pursuit and the Global Map, patrol

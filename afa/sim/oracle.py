@@ -64,6 +64,14 @@ class HazardField:
         return max(0.0, float(self.distance.ravel().take(j * t.nx + i).min())
                    - 0.5 * t.resolution)
 
+    @property
+    def sample_jump(self) -> float:
+        """How much farther apart two points' samples can be than the points: half a
+        diagonal each (the nearest sample, clamped onto the grid), and a nanometre for
+        rounding. The distance field is 1-Lipschitz between samples, so a point's
+        :meth:`clearance` changes by at most its move plus this."""
+        return math.sqrt(2.0) * self.terrain.resolution + 1e-9
+
 
 @dataclass(frozen=True)
 class Course:

@@ -77,6 +77,7 @@ class Terrain:
                                           NDArray[np.float32], int]] = {}
         self._padded: NDArray[np.float32] | None = None
         self._circles: NDArray[np.float64] | None = None  # east, north, bounding radius
+        self._last_gap = (0.0, 0.0, -math.inf)  # near_obstacle's last point, its gap
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -222,7 +223,15 @@ class Terrain:
         c = self._circles
         if not len(c):
             return False
-        return bool((np.hypot(c[:, 0] - east, c[:, 1] - north) <= c[:, 2] + margin).any())
+        # The gap (distance less radius) to the nearest circle changes by no more than
+        # the point moves: while the last gap, less the move, exceeds the margin (with
+        # a nanometre for rounding), the answer is False without looking at every circle.
+        e0, n0, gap0 = self._last_gap
+        if gap0 - math.hypot(east - e0, north - n0) - 1e-9 > margin:
+            return False
+        distance = np.hypot(c[:, 0] - east, c[:, 1] - north)
+        self._last_gap = (east, north, float((distance - c[:, 2]).min()))
+        return bool((distance <= c[:, 2] + margin).any())
 
     def padded_surface(self) -> NDArray[np.float32]:
         """The surface inside a one-sample border at :data:`OFF_GRID_HEIGHT` (cached):

@@ -29,8 +29,11 @@ from __future__ import annotations
 import array
 import binascii
 import functools
+import logging
 import math
+import os
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum, StrEnum
 from typing import TypeAlias
@@ -186,10 +189,32 @@ def _crc_contributions() -> npt.NDArray[np.uint16]:
 _CRC_OFFSETS = np.arange(_CRC_SPAN - 1, -1, -1, dtype=np.intp) * 256
 
 
+@functools.cache
+def _crc_kernel() -> Callable[[npt.NDArray[np.uint8]], int] | None:
+    """The compiled CRC loop (decision 0019), or None for the numpy form: when numba is
+    not installed or cannot compile or cache it here, or ``AFA_KERNELS=numpy`` asks for
+    the numpy forms. Loaded on the first CRC, so importing the codec stays light."""
+    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
+        return None
+    try:
+        from components.nodding_laser._crc_jit import crc_kernel
+    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
+        if not (isinstance(exc, ModuleNotFoundError) and exc.name == "numba"):
+            logging.getLogger(__name__).warning("compiled SICK CRC unavailable (%s): "
+                                                "numpy fallback", exc)
+        return None
+    return crc_kernel  # type: ignore[no-any-return]
+
+
 def sick_crc16(data: bytes | bytearray | memoryview) -> int:
-    """SICK's CRC-16 of ``data`` (:func:`sick_crc16_reference`): one table lookup per
-    byte, XORed together in numpy."""
+    """SICK's CRC-16 of ``data`` (:func:`sick_crc16_reference`): the compiled loop, or
+    one table lookup per byte XORed together in numpy (a scan telegram is checked twice,
+    by the emulator and by the driver, 75 times a simulated second)."""
     raw = np.frombuffer(data, dtype=np.uint8)
+    kernel = _crc_kernel()
+    if kernel is not None:
+        raw.flags.writeable = False  # the kernel's one signature takes read-only bytes
+        return int(kernel(raw))
     if raw.size > _CRC_SPAN:
         return sick_crc16_reference(data)
     if raw.size == 0:

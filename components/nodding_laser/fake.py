@@ -337,7 +337,7 @@ class FakeNodLaser(FakeDevice[HostCommand]):
             raise ValueError(f"range source returned {ranges.size} values for {count} beams")
         if self.noise_m > 0:
             ranges = ranges + self.rng.normal(0.0, self.noise_m, ranges.shape)
-        counts = np.round(ranges * 1000.0)
+        counts = np.rint(ranges * 1000.0)  # np.round without its Python wrapper
         good = (counts >= 1) & (counts < _MAX_COUNT)  # False for NaN and inf
         words = np.where(good, counts, NO_RETURN_WORD).astype(np.int64)
         raw = tuple(words.tolist())

@@ -138,3 +138,32 @@ def test_a_paced_run_keeps_to_its_realtime_factor_and_takes_a_world_by_name(tmp_
     assert summary["world"] == "slalom" and summary["mode"] == "teleop"
     # pacing caps the speed (an upper bound: a slow machine cannot make this fail)
     assert summary["realtime_factor"] <= 40 * 1.05
+
+
+async def test_the_least_clearance_is_the_least_over_every_physics_step(monkeypatch):
+    """The lookups the simulation skips (decision 0019) never hide a closer approach:
+    after every physics step the least clearance equals the least of the outline's
+    clearance looked up at every step so far."""
+    simulation = RaptorSimulation.from_xml(RAPTOR, WORLDS / "rock-field.xml",
+                                           clock=VirtualClock(), seed=0, teleop=True)
+    every_step: list[float] = []
+    mismatches: list[tuple[int, float, float]] = []
+    track = simulation._track_clearance
+
+    def track_and_look(self=simulation):
+        state, outline = self.state, self.vehicle.footprint(0.35)
+        c, s = math.cos(state.yaw), math.sin(state.yaw)
+        every_step.append(self._hazards.clearance(
+            state.east + outline[:, 0] * c - outline[:, 1] * s,
+            state.north + outline[:, 0] * s + outline[:, 1] * c))
+        track()
+        if self.clearance != min(every_step):
+            mismatches.append((len(every_step), self.clearance, min(every_step)))
+
+    monkeypatch.setattr(simulation, "_track_clearance", track_and_look)
+    async with simulation:
+        await simulation.system.run(12.0)
+    assert len(every_step) > 500 and simulation.state.distance > 5.0
+    assert math.isfinite(simulation.clearance)
+    assert simulation.clearance == min(every_step)
+    assert mismatches == []

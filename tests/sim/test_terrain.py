@@ -152,3 +152,23 @@ def test_grids_are_read_only() -> None:
     terrain = Terrain.from_spec(SLOPE)
     with pytest.raises(ValueError):
         terrain.surface[0, 0] = 1.0
+
+
+def test_near_obstacle_along_a_path_answers_as_the_circle_test() -> None:
+    """The cached gap (decision 0019) only skips work: along a winding path that passes
+    close to, between and away from obstacles, in small and large steps, every answer is
+    the plain test "within margin of some bounding circle"."""
+    obstacles = [Obstacle("cylinder", east=-10, north=0, radius=0.5, height=0.8),
+                 Obstacle("cylinder", east=3, north=4, radius=1.0, height=1.0),
+                 Obstacle("box", east=8, north=-6, length=2, width=1, height=0.6)]
+    terrain = Terrain.from_spec(SLOPE, obstacles)
+    circles = [(o.east, o.north, o.bounding_radius()) for o in obstacles]
+    t = np.linspace(0.0, 6 * math.pi, 700)
+    path = np.stack([14 * np.cos(t / 3), 9 * np.sin(t)], axis=1)
+    path = np.concatenate([path, path[::37]])  # then jumps across the field
+    answers = []
+    for (east, north), margin in zip(path, np.resize([0.5, 2.3, 4.0], len(path)), strict=True):
+        expected = any(math.hypot(ce - east, cn - north) <= r + margin for ce, cn, r in circles)
+        answers.append(expected)
+        assert terrain.near_obstacle(float(east), float(north), float(margin)) is expected
+    assert any(answers) and not all(answers)
