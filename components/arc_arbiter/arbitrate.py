@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -161,6 +161,11 @@ class VoteArbiter:
         self._book: dict[str, _Entry] = {}
         self._seen: set[str] = set()
         self._names: tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]] | None = None
+        # The book's content changes with ``_version``; the last decision is kept with the
+        # version it was made from, so a vote that repeats its behaviour's last one (the
+        # safety catch's "clear", every scan) costs no new decision.
+        self._version = 0
+        self._last: tuple[int, ArbiterDecision] | None = None
         n = len(arcs)
         # Preference among tied arcs: straighter first, then left (positive curvature).
         order = sorted(range(n), key=lambda k: (abs(float(arcs.curvatures[k])),
@@ -180,20 +185,27 @@ class VoteArbiter:
         """
         if not math.isfinite(received):
             raise ValueError(f"receive time must be finite, got {received!r}")
-        self.arcs.check(vote.curvatures, f"{vote.behaviour!r} votes")
+        previous = self._book.get(vote.behaviour)
+        if previous is not None and _same_arrays(previous.vote, vote):
+            self._book[vote.behaviour] = replace(previous, vote=vote, received=float(received))
+            return
+        if previous is None or vote.curvatures is not previous.vote.curvatures:
+            self.arcs.check(vote.curvatures, f"{vote.behaviour!r} votes")
         known = vote.behaviour in BEHAVIOUR_WEIGHTS
         weight = weight_for(vote.behaviour, self.parameters, self.unknown_weight)
         weighted = weight * vote.certainty.astype(np.float64) * vote.vote.astype(np.float64)
-        if vote.behaviour not in self._book:
+        if previous is None:
             self._names = None
         self._book[vote.behaviour] = _Entry(vote, float(received), weighted, vote.veto,
                                             vote.maxSpeed.astype(np.float64), known)
         self._seen.add(vote.behaviour)
+        self._version += 1
 
     def forget(self, behaviour: str) -> None:
         """Drop a behaviour's vote at once (e.g. the component unsubscribed it)."""
         if self._book.pop(behaviour, None) is not None:
             self._names = None
+            self._version += 1
 
     @property
     def behaviours(self) -> tuple[str, ...]:
@@ -225,6 +237,15 @@ class VoteArbiter:
         for name in stale_names:
             del self._book[name]
             self._names = None
+            self._version += 1
+        if self._last is not None and self._last[0] == self._version:
+            return replace(self._last[1], time=now)  # nothing the decision reads changed
+        decision = self._decide(now)
+        self._last = (self._version, decision)
+        return decision
+
+    def _decide(self, now: float) -> ArbiterDecision:
+        """The decision over the book as it is (module docstring)."""
         entries = list(self._book.values())
         if self._names is None:  # membership changed: recompute the display names
             self._names = (tuple(sorted(self._book)),
@@ -261,3 +282,12 @@ class VoteArbiter:
               cause: Failsafe) -> ArbiterDecision:
         return ArbiterDecision(now, self._straight, 0.0, 0.0, 0.0, scores, vetoed, fresh,
                                stale, unknown, cause)
+
+
+def _same_arrays(kept: ArcVoteIDL, vote: ArcVoteIDL) -> bool:
+    """True if ``vote`` carries the very arrays of ``kept`` (a producer re-stamping the
+    same votes, :meth:`components.arcs.ArcVotes.to_idl`): event arrays are read-only, so
+    the same objects hold the same values and the derived arrays can be kept."""
+    return (vote.curvatures is kept.curvatures and vote.veto is kept.veto
+            and vote.vote is kept.vote and vote.certainty is kept.certainty
+            and vote.maxSpeed is kept.maxSpeed)
