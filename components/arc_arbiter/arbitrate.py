@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -126,14 +126,23 @@ class ArbiterDecision:
     unknown: tuple[str, ...]
     failsafe: Failsafe | None
 
+    def at(self, time: float) -> ArbiterDecision:
+        """This decision, made again at ``time``."""
+        return ArbiterDecision(time, self.index, self.curvature, self.steering, self.speed,
+                               self.scores, self.vetoed, self.fresh, self.stale, self.unknown,
+                               self.failsafe)
+
     @property
     def stopped(self) -> bool:
         """True when the command is to stand still."""
         return self.speed == 0.0
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(eq=False, slots=True)
 class _Entry:
+    """A behaviour's latest vote; ``vote`` and ``received`` move on when a vote repeats
+    the arrays of the previous one (the derived arrays stay)."""
+
     vote: ArcVoteIDL
     received: float
     weighted: NDArray[np.float64]  # weight · certainty · vote, float64
@@ -187,7 +196,7 @@ class VoteArbiter:
             raise ValueError(f"receive time must be finite, got {received!r}")
         previous = self._book.get(vote.behaviour)
         if previous is not None and _same_arrays(previous.vote, vote):
-            self._book[vote.behaviour] = replace(previous, vote=vote, received=float(received))
+            previous.vote, previous.received = vote, float(received)
             return
         if previous is None or vote.curvatures is not previous.vote.curvatures:
             self.arcs.check(vote.curvatures, f"{vote.behaviour!r} votes")
@@ -239,7 +248,7 @@ class VoteArbiter:
             self._names = None
             self._version += 1
         if self._last is not None and self._last[0] == self._version:
-            return replace(self._last[1], time=now)  # nothing the decision reads changed
+            return self._last[1].at(now)  # nothing the decision reads changed
         decision = self._decide(now)
         self._last = (self._version, decision)
         return decision
