@@ -192,7 +192,8 @@ class Sampler:
             if code.co_argcount and code.co_varnames[0] == "self":
                 obj = frame.f_locals.get("self")
                 if isinstance(obj, (component, reactor)):
-                    return str(obj.name)
+                    # (a sample can land in __init__, before the name is set)
+                    return str(getattr(obj, "name", type(obj).__name__))
                 if isinstance(obj, fake):
                     return f"emulator {type(obj).__name__}"
                 if isinstance(obj, simulation):

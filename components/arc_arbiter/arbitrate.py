@@ -126,14 +126,23 @@ class ArbiterDecision:
     unknown: tuple[str, ...]
     failsafe: Failsafe | None
 
+    def at(self, time: float) -> ArbiterDecision:
+        """This decision, made again at ``time``."""
+        return ArbiterDecision(time, self.index, self.curvature, self.steering, self.speed,
+                               self.scores, self.vetoed, self.fresh, self.stale, self.unknown,
+                               self.failsafe)
+
     @property
     def stopped(self) -> bool:
         """True when the command is to stand still."""
         return self.speed == 0.0
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(eq=False, slots=True)
 class _Entry:
+    """A behaviour's latest vote; ``vote`` and ``received`` move on when a vote repeats
+    the arrays of the previous one (the derived arrays stay)."""
+
     vote: ArcVoteIDL
     received: float
     weighted: NDArray[np.float64]  # weight · certainty · vote, float64
@@ -161,6 +170,11 @@ class VoteArbiter:
         self._book: dict[str, _Entry] = {}
         self._seen: set[str] = set()
         self._names: tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]] | None = None
+        # The book's content changes with ``_version``; the last decision is kept with the
+        # version it was made from, so a vote that repeats its behaviour's last one (the
+        # safety catch's "clear", every scan) costs no new decision.
+        self._version = 0
+        self._last: tuple[int, ArbiterDecision] | None = None
         n = len(arcs)
         # Preference among tied arcs: straighter first, then left (positive curvature).
         order = sorted(range(n), key=lambda k: (abs(float(arcs.curvatures[k])),
@@ -180,20 +194,27 @@ class VoteArbiter:
         """
         if not math.isfinite(received):
             raise ValueError(f"receive time must be finite, got {received!r}")
-        self.arcs.check(vote.curvatures, f"{vote.behaviour!r} votes")
+        previous = self._book.get(vote.behaviour)
+        if previous is not None and _same_arrays(previous.vote, vote):
+            previous.vote, previous.received = vote, float(received)
+            return
+        if previous is None or vote.curvatures is not previous.vote.curvatures:
+            self.arcs.check(vote.curvatures, f"{vote.behaviour!r} votes")
         known = vote.behaviour in BEHAVIOUR_WEIGHTS
         weight = weight_for(vote.behaviour, self.parameters, self.unknown_weight)
         weighted = weight * vote.certainty.astype(np.float64) * vote.vote.astype(np.float64)
-        if vote.behaviour not in self._book:
+        if previous is None:
             self._names = None
         self._book[vote.behaviour] = _Entry(vote, float(received), weighted, vote.veto,
                                             vote.maxSpeed.astype(np.float64), known)
         self._seen.add(vote.behaviour)
+        self._version += 1
 
     def forget(self, behaviour: str) -> None:
         """Drop a behaviour's vote at once (e.g. the component unsubscribed it)."""
         if self._book.pop(behaviour, None) is not None:
             self._names = None
+            self._version += 1
 
     @property
     def behaviours(self) -> tuple[str, ...]:
@@ -225,6 +246,15 @@ class VoteArbiter:
         for name in stale_names:
             del self._book[name]
             self._names = None
+            self._version += 1
+        if self._last is not None and self._last[0] == self._version:
+            return self._last[1].at(now)  # nothing the decision reads changed
+        decision = self._decide(now)
+        self._last = (self._version, decision)
+        return decision
+
+    def _decide(self, now: float) -> ArbiterDecision:
+        """The decision over the book as it is (module docstring)."""
         entries = list(self._book.values())
         if self._names is None:  # membership changed: recompute the display names
             self._names = (tuple(sorted(self._book)),
@@ -261,3 +291,12 @@ class VoteArbiter:
               cause: Failsafe) -> ArbiterDecision:
         return ArbiterDecision(now, self._straight, 0.0, 0.0, 0.0, scores, vetoed, fresh,
                                stale, unknown, cause)
+
+
+def _same_arrays(kept: ArcVoteIDL, vote: ArcVoteIDL) -> bool:
+    """True if ``vote`` carries the very arrays of ``kept`` (a producer re-stamping the
+    same votes, :meth:`components.arcs.ArcVotes.to_idl`): event arrays are read-only, so
+    the same objects hold the same values and the derived arrays can be kept."""
+    return (vote.curvatures is kept.curvatures and vote.veto is kept.veto
+            and vote.vote is kept.vote and vote.certainty is kept.certainty
+            and vote.maxSpeed is kept.maxSpeed)

@@ -238,41 +238,11 @@ def build_sweep_tables(arcs: ArcSet, geometry: MapGeometry, *, radius: float, st
     if not (horizon >= 0.0 and math.isfinite(horizon)):
         raise ValueError(f"horizon must be finite and ≥ 0, got {horizon}")
 
-    window = math.ceil(2.0 * radius / g) + 1
-    span = np.arange(window)
-    r2 = radius * radius
-    per_arc: list[tuple[NDArray[np.intp], NDArray[np.float64]]] = []
-    horizons = np.empty(len(arcs))
-    for k, kappa in enumerate(arcs.curvatures.tolist()):
-        s_k = horizon if kappa == 0.0 else min(horizon, math.pi / abs(kappa))
-        horizons[k] = s_k
-        s = np.arange(math.floor(s_k / step + 1e-9) + 1) * step
-        flats: list[NDArray[np.intp]] = []
-        reaches: list[NDArray[np.float64]] = []
-        if row_hi > row_lo:
-            for offset in offsets:
-                x, y, _ = arc_points(s, kappa, offset)
-                xm = x - fx
-                ym = y - fy
-                i = np.floor((xm - radius - geometry.origin_x) / g).astype(np.intp)[:, None] + span
-                j = np.floor((ym - radius - geometry.origin_y) / g).astype(np.intp)[:, None] + span
-                x0 = geometry.origin_x + i * g
-                y0 = geometry.origin_y + j * g
-                dx = np.maximum(np.maximum(x0 - xm[:, None], xm[:, None] - (x0 + g)), 0.0)
-                dy = np.maximum(np.maximum(y0 - ym[:, None], ym[:, None] - (y0 + g)), 0.0)
-                hit = dx[:, :, None] ** 2 + dy[:, None, :] ** 2 <= r2
-                hit &= ((i >= row_lo) & (i < row_hi))[:, :, None]
-                hit &= ((j >= 0) & (j < geometry.cols))[:, None, :]
-                sample, a, b = np.nonzero(hit)
-                flats.append(i[sample, a] * geometry.cols + j[sample, b])
-                reaches.append(s[sample])
-        flat = np.concatenate(flats) if flats else np.empty(0, dtype=np.intp)
-        reach = np.concatenate(reaches) if reaches else np.empty(0)
-        order = np.argsort(reach, kind="stable")
-        unique, first = np.unique(flat[order], return_index=True)
-        first_reach = reach[order][first]
-        by_reach = np.lexsort((unique, first_reach))
-        per_arc.append((unique[by_reach].astype(np.intp), first_reach[by_reach]))
+    horizons = np.array([horizon if kappa == 0.0 else min(horizon, math.pi / abs(kappa))
+                         for kappa in arcs.curvatures.tolist()])
+    per_arc = [_arc_cells(kappa, s_k, step, offsets, geometry, (fx, fy), radius,
+                          (row_lo, row_hi))
+               for kappa, s_k in zip(arcs.curvatures.tolist(), horizons.tolist(), strict=True)]
 
     width = max(len(c) for c, _ in per_arc) + 1  # every row ends in a pad entry
     pad = geometry.rows * geometry.cols
@@ -288,6 +258,53 @@ def build_sweep_tables(arcs: ArcSet, geometry: MapGeometry, *, radius: float, st
     return SweepTables(arcs=arcs, geometry=geometry, map_frame=(fx, fy), radius=float(radius),
                        step=float(step), row_range=(row_lo, row_hi), disc_offsets=offsets,
                        horizons=horizons, cells=cells, reach=reach_table, counts=counts)
+
+
+def _arc_cells(kappa: float, s_k: float, step: float, offsets: tuple[float, ...],
+               geometry: MapGeometry, map_frame: tuple[float, float], radius: float,
+               rows: tuple[int, int]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """One arc's table row: the cells its discs touch (flat indices) and each one's reach
+    (the first sample's arc length), ordered by reach, then cell.
+
+    The discs of every body point are tested in one pass over all their samples, and a
+    cell's reach is the least over them (a dense per-cell minimum, not a sort of every
+    touch: the samples outnumber the cells a hundredfold).
+    """
+    row_lo, row_hi = rows
+    s = np.arange(math.floor(s_k / step + 1e-9) + 1) * step
+    if row_hi <= row_lo:
+        return np.empty(0, dtype=np.intp), np.empty(0)
+    points = [arc_points(s, kappa, offset) for offset in offsets]
+    xm = np.concatenate([x for x, _, _ in points]) - map_frame[0]
+    ym = np.concatenate([y for _, y, _ in points]) - map_frame[1]
+    sample, flat = _touched(xm, ym, geometry, radius, rows)
+    pad = geometry.rows * geometry.cols
+    first = np.full(pad, np.inf)
+    np.minimum.at(first, flat, s[sample % s.shape[0]])
+    cells = np.flatnonzero(first < np.inf)
+    reach = first[cells]
+    order = np.lexsort((cells, reach))
+    return cells[order].astype(np.intp), reach[order]
+
+
+def _touched(xm: NDArray[np.float64], ym: NDArray[np.float64], geometry: MapGeometry,
+             radius: float, rows: tuple[int, int]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Every (sample, flat cell) pair such that the closed disc of ``radius`` around map
+    point (xm, ym)[sample] meets the cell's closed square, for cells in the evaluated
+    ``rows`` and the map's columns."""
+    g = geometry.gridsize
+    span = np.arange(math.ceil(2.0 * radius / g) + 1)
+    i = np.floor((xm - radius - geometry.origin_x) / g).astype(np.intp)[:, None] + span
+    j = np.floor((ym - radius - geometry.origin_y) / g).astype(np.intp)[:, None] + span
+    x0 = geometry.origin_x + i * g
+    y0 = geometry.origin_y + j * g
+    dx = np.maximum(np.maximum(x0 - xm[:, None], xm[:, None] - (x0 + g)), 0.0)
+    dy = np.maximum(np.maximum(y0 - ym[:, None], ym[:, None] - (y0 + g)), 0.0)
+    dx2, dy2 = dx * dx, dy * dy
+    dx2[(i < rows[0]) | (i >= rows[1])] = np.inf  # outside: never within the radius
+    dy2[(j < 0) | (j >= geometry.cols)] = np.inf
+    sample, a, b = np.nonzero(dx2[:, :, None] + dy2[:, None, :] <= radius * radius)
+    return sample, i[sample, a] * geometry.cols + j[sample, b]
 
 
 @dataclass(frozen=True, eq=False)

@@ -67,6 +67,7 @@ from components.terrain_map.grid import (
     ego_map_pose,
 )
 from components.terrain_map.parameters import TerrainMapParameters
+from components.trusted import trusted
 from idl import (
     EgoMapArrayEventIDL,
     EgoMapSeqEventIDL,
@@ -365,8 +366,8 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
             return  # a cleared map is still filling (Table A.6 MapUpdateTime)
         stamp = TimeIDL.from_seconds(self.clock.now())
         layers = self.grid.layers()
-        terrain = MapArrayEventIDL(**_header(layers, stamp, "World", np.eye(4),
-                                             self.initial_utm), **_layers(layers))
+        terrain = trusted(MapArrayEventIDL, **_header(layers, stamp, "World", np.eye(4),
+                                                      self.initial_utm), **_layers(layers))
         self.latest_map.set(terrain)
         self.maps.publish(terrain)
         if self.map_seqs.subscribed:
@@ -378,8 +379,9 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
             pose = ego_map_pose(self.stable, ground,
                                 self.parameters.BumperHeight / 1000.0)
             ego_layers = self.ego.sample(self.grid, pose)
-            ego = EgoMapArrayEventIDL(**_header(ego_layers, stamp, self.ground_frame, pose,
-                                                self.initial_utm), **_layers(ego_layers))
+            ego = trusted(EgoMapArrayEventIDL, **_header(ego_layers, stamp, self.ground_frame,
+                                                         pose, self.initial_utm),
+                          **_layers(ego_layers))
             self.latest_ego.set(ego)
             self.ego_maps.publish(ego)
             if self.ego_seqs.subscribed:

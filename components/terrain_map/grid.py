@@ -772,13 +772,13 @@ def _quaternion(r: FloatArray) -> FloatArray:
     return result
 
 
-def _matrix(q: FloatArray) -> FloatArray:
-    w, x, y, z = q
-    return np.array([
+def _rotation_rows(w: float, x: float, y: float, z: float) -> list[list[float]]:
+    """The rotation matrix of unit quaternion (w, x, y, z), as rows of Python floats."""
+    return [
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    ]
 
 
 def interpolate_transform(pose0: ArrayLike, pose1: ArrayLike, s: float) -> FloatArray:
@@ -793,19 +793,32 @@ def interpolate_transform(pose0: ArrayLike, pose1: ArrayLike, s: float) -> Float
 def _interpolate(a: FloatArray, q0: FloatArray, b: FloatArray, q1: FloatArray,
                  s: float) -> FloatArray:
     """:func:`interpolate_transform` of poses ``a`` and ``b`` whose rotations' unit
-    quaternions (:func:`_quaternion`) are ``q0`` and ``q1``."""
+    quaternions (:func:`_quaternion`) are ``q0`` and ``q1``.
+
+    A scan is placed with this once, so it works on Python floats, element by element
+    with the operations of the array form (the same IEEE results, without numpy's
+    per-call cost on 4-vectors); the two dot products stay numpy's, whose summation
+    order is BLAS's."""
     dot = float(q0 @ q1)
+    sign = 1.0
     if dot < 0.0:  # q and -q are one rotation: take the shorter arc
-        q1, dot = -q1, -dot
+        sign, dot = -1.0, -dot
+    p0 = q0.tolist()
+    p1 = [sign * c for c in q1.tolist()]  # exact: a sign flip
     if dot > 0.9999995:  # under ~0.1°: linear blend is exact to rounding
-        q = q0 + s * (q1 - q0)
+        q = [c0 + s * (c1 - c0) for c0, c1 in zip(p0, p1, strict=True)]
     else:
         theta = math.acos(dot)
-        q = (math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta)
-    out = np.eye(4)
-    out[:3, :3] = _matrix(q / np.linalg.norm(q))
-    out[:3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
-    return out
+        f0, f1, f = math.sin((1 - s) * theta), math.sin(s * theta), math.sin(theta)
+        q = [(f0 * c0 + f1 * c1) / f for c0, c1 in zip(p0, p1, strict=True)]
+    quat = np.array(q)
+    norm = math.sqrt(float(quat.dot(quat)))  # np.linalg.norm of a vector, exactly
+    rows = _rotation_rows(*(c / norm for c in q))
+    ta, tb = a[:3, 3].tolist(), b[:3, 3].tolist()
+    for row, t0, t1 in zip(rows, ta, tb, strict=True):
+        row.append(t0 + s * (t1 - t0))
+    rows.append([0.0, 0.0, 0.0, 1.0])
+    return np.array(rows)
 
 
 class PoseBuffer:

@@ -191,6 +191,26 @@ def test_staleness_uses_the_receive_time_not_the_stamp():
     assert a.decide(6.0).failsafe is None
 
 
+def test_a_re_stamped_vote_keeps_its_behaviour_fresh_and_decides_alike():
+    # The safety catch publishes its "clear" every scan: the same arrays, a new stamp.
+    a = arbiter(StaleVoteTimeSec=1, StaleVoteTimeUSec=0)
+    clear = vote("ObstacleDetection", veto=[MID])
+    a.receive(vote("PurePursuit", peak=MID - 1), 0.0)
+    a.receive(clear, 0.0)
+    first = a.decide(0.0)
+    again = clear.model_copy(update={"time": TimeIDL.from_seconds(0.9)})
+    a.receive(again, 0.9)
+    a.receive(vote("PurePursuit", peak=MID - 1), 0.9)
+    d = a.decide(1.5)  # the first "clear" would be stale now; the re-stamped one is not
+    assert d.failsafe is None and d.fresh == ("ObstacleDetection", "PurePursuit")
+    assert d.index == first.index == MID - 1 and d.time == 1.5
+    assert a.latest("ObstacleDetection") is again
+    a.receive(vote("ObstacleDetection", veto=range(N)), 1.6)  # new arrays: a new decision
+    assert a.decide(1.6).failsafe == "all-vetoed"
+    a.receive(vote("PurePursuit", peak=MID), 2.0)
+    assert a.decide(2.7).failsafe is None  # the halt went stale
+
+
 # --- fail-safes and ties ------------------------------------------------------------------
 
 

@@ -409,6 +409,40 @@ def test_interpolation_is_linear_in_translation_and_slerp_in_rotation() -> None:
     assert abs(yaw_of(d)) == pytest.approx(math.pi)
 
 
+def _slerp_array_form(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+    """The interpolation written with numpy arrays throughout (the form the float-by-
+    float implementation replaced): the reference for bit-for-bit equality."""
+    q0 = grid_module._quaternion(a[:3, :3])
+    q1 = grid_module._quaternion(b[:3, :3])
+    dot = float(q0 @ q1)
+    if dot < 0.0:
+        q1, dot = -q1, -dot
+    if dot > 0.9999995:
+        q = q0 + s * (q1 - q0)
+    else:
+        theta = math.acos(dot)
+        q = (math.sin((1 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta)
+    w, x, y, z = q / np.linalg.norm(q)
+    out = np.eye(4)
+    out[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                   [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                   [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    out[:3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
+    return out
+
+
+def test_interpolation_equals_the_array_form_bit_for_bit() -> None:
+    rng = np.random.default_rng(12)
+    for _ in range(400):
+        yaw, pitch, roll = rng.uniform(-math.pi, math.pi), *rng.uniform(-0.5, 0.5, 2)
+        a = pose(*rng.normal(size=3) * 50, yaw=yaw, pitch=pitch, roll=roll)
+        turn = 10.0 ** rng.uniform(-7, 0.5)  # both the linear blend and slerp
+        b = pose(*(a[:3, 3] + rng.normal(size=3)), yaw=yaw + turn * rng.choice([-1, 1]),
+                 pitch=pitch + turn * rng.uniform(-1, 1), roll=roll)
+        s = float(rng.uniform())
+        assert np.array_equal(interpolate_transform(a, b, s), _slerp_array_form(a, b, s))
+
+
 def test_pose_buffer_lookups() -> None:
     buffer = PoseBuffer(capacity=4)
     assert buffer.lookup(0.0).status is PoseStatus.EMPTY
