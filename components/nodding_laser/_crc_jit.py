@@ -1,5 +1,5 @@
 """The compiled form of :func:`components.nodding_laser.codec.sick_crc16` (decision 0014's
-pattern, decision 0019): the LMS telegram listing's byte-by-byte register update in one
+pattern, decision 0021): the LMS telegram listing's byte-by-byte register update in one
 loop, the same integers as :func:`~components.nodding_laser.codec.sick_crc16_reference`.
 Importing this module compiles the kernel, or loads it from numba's on-disk cache; it
 raises ImportError where numba is missing.

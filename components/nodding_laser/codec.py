@@ -191,7 +191,7 @@ _CRC_OFFSETS = np.arange(_CRC_SPAN - 1, -1, -1, dtype=np.intp) * 256
 
 @functools.cache
 def _crc_kernel() -> Callable[[npt.NDArray[np.uint8]], int] | None:
-    """The compiled CRC loop (decision 0019), or None for the numpy form: when numba is
+    """The compiled CRC loop (decision 0021), or None for the numpy form: when numba is
     not installed or cannot compile or cache it here, or ``AFA_KERNELS=numpy`` asks for
     the numpy forms. Loaded on the first CRC, so importing the codec stays light."""
     if os.environ.get("AFA_KERNELS", "").lower() == "numpy":

@@ -618,7 +618,7 @@ def test_the_table_driven_crc_equals_the_manuals_byte_by_byte_routine(data):
 
 @pytest.mark.parametrize("form", ["compiled", "numpy"])
 def test_both_crc_forms_equal_the_manuals_routine(form: str, monkeypatch) -> None:
-    """The compiled loop (decision 0019) and the numpy table give the listing's CRC, on
+    """The compiled loop (decision 0021) and the numpy table give the listing's CRC, on
     the captured scan, a bytearray and random telegram-sized data."""
     from components.nodding_laser import codec
 

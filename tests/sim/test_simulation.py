@@ -141,7 +141,7 @@ def test_a_paced_run_keeps_to_its_realtime_factor_and_takes_a_world_by_name(tmp_
 
 
 async def test_the_least_clearance_is_the_least_over_every_physics_step(monkeypatch):
-    """The lookups the simulation skips (decision 0019) never hide a closer approach:
+    """The lookups the simulation skips (decision 0021) never hide a closer approach:
     after every physics step the least clearance equals the least of the outline's
     clearance looked up at every step so far."""
     simulation = RaptorSimulation.from_xml(RAPTOR, WORLDS / "rock-field.xml",

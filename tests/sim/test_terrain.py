@@ -155,7 +155,7 @@ def test_grids_are_read_only() -> None:
 
 
 def test_near_obstacle_along_a_path_answers_as_the_circle_test() -> None:
-    """The cached gap (decision 0019) only skips work: along a winding path that passes
+    """The cached gap (decision 0021) only skips work: along a winding path that passes
     close to, between and away from obstacles, in small and large steps, every answer is
     the plain test "within margin of some bounding circle"."""
     obstacles = [Obstacle("cylinder", east=-10, north=0, radius=0.5, height=0.8),
