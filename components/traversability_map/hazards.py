@@ -22,7 +22,15 @@ tests):
    surrounding ground (the median elevation of the known cells within ``2·r`` cells,
    ``r`` as in 5): the foot of a ditch's wall, never the open ground in front of a rock
    (marking both sides grew a 0.6 m trunk into a 2 m obstacle, which closed the gaps of
-   a forest; Obstacle Avoidance adds the vehicle's own radius). With
+   a forest; Obstacle Avoidance adds the vehicle's own radius). The *top* of a low,
+   wide obstacle seen from one side has no lower neighbour in view (its near face is
+   in the rim cells, its far side in shadow) and would read as a level plateau; a
+   known cell is a step too when it lies within ``r`` cells of a step cell, is
+   *bounded* (along some axis each side holds, within ``r`` cells, a cell a step lower
+   or an unknown cell: the ground beyond a ditch's lip runs on level towards the
+   vehicle and is not bounded), lies a step above the surrounding ground (the median
+   as above; its step is that height) and is joined to a step cell through such cells
+   (8-connected). A smooth hill's top has no step cell to join. With
    ``StepPercent`` 0 the hazard is binary, 1 when ``step >= T``; with ``StepPercent``
    1 it is graded, ``min(1, step / T)``: the step "as a percentage" of ``Stepheight``
    (which stays in millimetres).
@@ -102,6 +110,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import ndimage
 
 from components.terrain_map.grid import GridGeometry, TerrainLayers
 
@@ -401,6 +410,10 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
                                                            upper)), np.nan)
     with np.errstate(invalid="ignore"):
         step_full = known & (step >= threshold)
+    if reach >= 1:  # the top of a low, wide obstacle: no lower neighbour in view
+        top, above = _raised_tops(elev, known, step_full, threshold, reach)
+        step = np.where(top, np.maximum(step, above), step)
+        step_full |= top
     if rules.step_percent:
         step_hazard = np.minimum(step / threshold, 1.0)
     else:
@@ -553,7 +566,18 @@ def _below_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
     median elevation of the known cells within ``radius`` cells (a square window
     clipped at the grid's edge): below the level of the ground around them, in a pit or
     a ditch (module doc)."""
-    result = np.zeros_like(candidates)
+    with np.errstate(invalid="ignore"):
+        below: NDArray[np.bool_] = candidates & (
+            -_above_surroundings(candidates, elev, radius) >= threshold)
+    return below
+
+
+def _above_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
+                        radius: int) -> FloatArray:
+    """How far each candidate (a known cell) lies above the median elevation of the
+    known cells within ``radius`` cells (a square window clipped at the grid's edge),
+    the level of the ground around it; NaN elsewhere."""
+    result = np.full(elev.shape, np.nan)
     where = np.argwhere(candidates)
     if len(where) == 0:
         return result
@@ -561,8 +585,42 @@ def _below_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
         _padded(elev, radius, np.nan), (2 * radius + 1, 2 * radius + 1))
     i, j = where[:, 0], where[:, 1]
     level = np.nanmedian(windows[i, j].reshape(len(where), -1), axis=1)
-    result[i, j] = level - elev[i, j] >= threshold[i, j]
+    result[i, j] = elev[i, j] - level
     return result
+
+
+def _raised_tops(elev: FloatArray, known: NDArray[np.bool_], stepped: NDArray[np.bool_],
+                 threshold: FloatArray, reach: int) -> tuple[NDArray[np.bool_], FloatArray]:
+    """The tops of obstacles that the step rule cannot see (module doc, 2): known cells
+    without a step of their own, within ``reach`` cells of a step cell, *bounded* (along
+    some axis each side holds, within ``reach``, a cell a step lower or an unknown one),
+    lying a step above the surrounding ground (:func:`_above_surroundings` over
+    ``2·reach``), and joined to a step cell through such cells (8-connected). Returns
+    the tops and their height above the surroundings (NaN elsewhere)."""
+    shape = elev.shape
+    none = np.zeros(shape, dtype=bool)
+    ring = np.ones((3, 3), dtype=bool)
+    near = known & ~stepped & ndimage.binary_dilation(stepped, ring, iterations=reach)
+    if not near.any():
+        return none, np.full(shape, np.nan)
+    padded_elev = _padded(elev, reach, np.nan)
+    padded_known = _padded(known, reach, False)
+    bounded = none.copy()
+    for di, dj in AXES:
+        closed = near.copy()
+        for sign in (1, -1):
+            heights = _line(padded_elev, reach, sign * di, sign * dj, reach, shape)
+            seen = _line(padded_known, reach, sign * di, sign * dj, reach, shape)
+            with np.errstate(invalid="ignore"):
+                closed &= (~seen | (heights <= elev - threshold)).any(axis=0)
+        bounded |= closed
+    above = _above_surroundings(bounded, elev, 2 * reach)
+    with np.errstate(invalid="ignore"):
+        raised = bounded & (above >= threshold)
+    labels, _ = ndimage.label(raised | stepped, ring)
+    joined = np.unique(labels[stepped])
+    tops: NDArray[np.bool_] = raised & np.isin(labels, joined[joined > 0])
+    return tops, above
 
 
 class TraversabilityMapper:
