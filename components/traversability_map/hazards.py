@@ -66,6 +66,12 @@ tests):
      this a 3 m gate in a wall was a sunken line across the gate). A ditch wider than
      the window is mostly floor and keeps its marked lips (the step rule's higher side)
      and holes.
+   - *Walled pit* (known): along some axis each side holds, within ``r`` cells, a wall
+     (a step cell or a hole), and the cell lies a step below the surrounding ground (as
+     above). The legal-slope allowance of the sunken rule is ``s·d``: 0.73 m from a
+     bank 2 m away, so the middle of a 1 m deep, 2.5 m wide ditch passed as "reachable
+     down a 20° ramp" although the cells between are its flat floor and its wall. A
+     ramp has no step cell; a ditch's lips are steps and its unseen parts holes.
    - *Hole* (unknown cell): along some axis, let ``b±`` be the nearest known cell on
      each side (both must exist), ``t`` the *trend*, the flatter of their fitted
      slopes (tan, at most the limit's), ``bank = elevation(b) - t·d_b`` on each side
@@ -83,17 +89,21 @@ tests):
      ditch's lip or a ledge's top is level ground back to the vehicle. The cell
      becomes hazard 1 with goodness ``inferred_goodness ×`` the best goodness along its
      lines. Unknown cells without such evidence stay NaN (unknown, never free).
-   - *Hole rim*: a known cell next to a hole (8-neighbours) whose fine cells are
-     mostly (over half) without points joins the hole (hazard 1, goodness
-     ``inferred_goodness ×`` its own): it was seen only along an edge, like the lip
-     strip of a cell that lies mostly over the ditch beyond an invisible near wall.
+   - *Hole rim*: a known cell next to a hole (8-neighbours) with at least half of its
+     fine cells without points joins the hole (hazard 1, and the goodness of
+     the best hole next to it): it was seen only along an edge, like the lip strip of a
+     cell that lies mostly over the ditch beyond an invisible near wall. (Its own
+     goodness, small as it is, could not replace in the Global Map the "free" reading
+     of that same edge taken before the hole was inferred.)
    - Known limitations: a shadow longer than ``hole_reach`` behind an obstacle whose
      face lies beyond reach of the shadow's far end can still read as a hole (against
      an obstacle that is impassable anyway); a ditch with a step (a rock, a kerb)
      within reach of its lip on every line is not marked from that lip; a ditch
      wider than ``2·hole_reach`` keeps an unknown middle, enclosed by its marked rim.
-6. **Goodness** ``= (1 - exp(-n / goodness_points)) · exp(-age / goodness_time) · a``:
-   how much data (n points), how recent (age = now - last seen; 1 if unknown), and how
+6. **Goodness** ``= (1 - exp(-n / goodness_points)) · f · exp(-age / goodness_time) · a``:
+   how much data (n points, and the fraction ``f`` of the cell's fine cells that hold
+   them: a cell seen along one edge, such as the lip of a ditch, says little about the
+   rest of it), how recent (age = now - last seen; 1 if unknown), and how
    accurate (``a = min(1, 1 / Farfieldscale)`` in the far field, else 1). Unknown
    cells have goodness 0. The Global Map compares goodness to decide which
    observation of a cell to keep.
@@ -433,6 +443,7 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     if rules.step_on and reach >= 1:
         sunken, hole, hole_goodness = _negative_obstacles(
             elev, low, goodness, known, step_full, slope, tan_limit, threshold, g, reach)
+        sunken |= _walled_pits(known, step_full | hole, elev, threshold, reach)
 
     hazard = np.zeros((rows, cols))
     if rules.step_on:
@@ -443,11 +454,13 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     hazard[~known] = np.nan
     hazard[hole] = 1.0
     goodness = np.where(hole, rules.inferred_goodness * hole_goodness, goodness)
-    if hole.any():  # the hole's rim: cells mostly unseen, seen only along an edge
+    if hole.any():  # the hole's rim: cells half or more unseen, seen along an edge
         beside = _stacked(_padded(hole, 1, False), 1, NEIGHBOURHOOD, (rows, cols)).any(axis=0)
-        rim = known & beside & (2 * cells.fine_known < cells.fine_total)
+        rim = known & beside & (2 * cells.fine_known <= cells.fine_total)
         hazard[rim] = 1.0
-        goodness = np.where(rim, rules.inferred_goodness * goodness, goodness)
+        joined = _stacked(_padded(np.where(hole, goodness, 0.0), 1, 0.0), 1, NEIGHBOURHOOD,
+                          (rows, cols)).max(axis=0)  # the goodness of the hole it joins
+        goodness = np.where(rim, joined, goodness)
         hole |= rim
 
     flags = np.where(far, FLAG_FAR, 0).astype(np.uint8)
@@ -466,6 +479,8 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
 def _goodness(cells: CoarseCells, rules: HazardRules, known: NDArray[np.bool_],
               far: NDArray[np.bool_], now: float) -> FloatArray:
     quantity = 1.0 - np.exp(-cells.count / rules.goodness_points)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a cell seen in part
+        quantity *= np.where(cells.fine_total > 0, cells.fine_known / cells.fine_total, 0.0)
     age = np.where(np.isnan(cells.last_seen), 0.0, np.maximum(now - cells.last_seen, 0.0))
     recency = np.exp(-age / rules.goodness_time)
     accuracy = np.where(far, rules.far_accuracy, 1.0)
@@ -558,6 +573,23 @@ def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
         hole |= drop
         np.maximum(hole_goodness, np.where(drop, best, 0.0), out=hole_goodness)
     return _below_surroundings(sunken, elev, threshold, 2 * reach), hole, hole_goodness
+
+
+def _walled_pits(candidates: NDArray[np.bool_], walls: NDArray[np.bool_], elev: FloatArray,
+                 threshold: FloatArray, reach: int) -> NDArray[np.bool_]:
+    """The candidates with, along some axis, a wall (a step cell or a hole) within
+    ``reach`` cells on each side, lying a step below the surrounding ground
+    (:func:`_below_surroundings`): the floor of a ditch between its lips (module doc,
+    5)."""
+    shape = elev.shape
+    padded = _padded(walls, reach, False)
+    enclosed = np.zeros(shape, dtype=bool)
+    for di, dj in AXES:
+        both = candidates.copy()
+        for sign in (1, -1):
+            both &= _line(padded, reach, sign * di, sign * dj, reach, shape).any(axis=0)
+        enclosed |= both
+    return _below_surroundings(enclosed, elev, threshold, 2 * reach)
 
 
 def _below_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,

@@ -123,7 +123,8 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
         far, _, _ = params(i, j)
         age = 0.0 if a[6] == -math.inf else max(now - a[6], 0.0)
         accuracy = min(1.0, 1.0 / rules.far_field_scale) if far else 1.0
-        return (1 - math.exp(-a[0] / rules.goodness_points)) \
+        with_points, total = fine_cells[(i, j)]
+        return (1 - math.exp(-a[0] / rules.goodness_points)) * with_points / total \
             * math.exp(-age / rules.goodness_time) * accuracy
 
     good = {(i, j): goodness(i, j) for i in range(rows) for j in range(cols)}
@@ -313,14 +314,26 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
             out["goodness"][i, j] = good[(i, j)]
             out["flags"][i, j] = flags
     holes = (out["flags"] & FLAG_HOLE) != 0
+    hole_good = np.where(holes, out["goodness"], 0.0)
+    walls = stepped | {(int(i), int(j)) for i, j in np.argwhere(holes)}
+    for i in range(rows):  # walled pits: a wall within reach each side, below the ground
+        for j in range(cols):
+            if cell(i, j) is None or not rules.step_on or reach < 1:
+                continue
+            if any(all(any((i + sign * k * di, j + sign * k * dj) in walls
+                           for k in range(1, reach + 1)) for sign in (1, -1))
+                   for di, dj in AXES) and below_ground(i, j, params(i, j)[1]):
+                out["hazard"][i, j] = 1.0
+                out["flags"][i, j] |= FLAG_SUNKEN
     for i in range(rows):
         for j in range(cols):
             with_points, total = fine_cells.get((i, j), [0, 0])
-            if cell(i, j) is None or 2 * with_points >= total:
+            if cell(i, j) is None or 2 * with_points > total:
                 continue
             if holes[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].any():
-                out["hazard"][i, j] = 1.0
-                out["goodness"][i, j] *= rules.inferred_goodness
+                out["hazard"][i, j] = 1.0  # joins the hole, with the best one's goodness
+                out["goodness"][i, j] = hole_good[max(i - 1, 0):i + 2,
+                                                  max(j - 1, 0):j + 2].max()
                 out["flags"][i, j] |= FLAG_HOLE
     return out
 
@@ -625,3 +638,17 @@ def test_a_smooth_hill_top_is_not_an_obstacle_top() -> None:
     assert layers.hazard[rows_at(4.0, 6.0), COARSE.cols // 2 - 2:COARSE.cols // 2 + 2].max() \
         < 1.0
     assert flagged(layers, FLAG_STEP).any()  # the rock
+
+
+def test_the_flat_floor_of_a_wide_ditch_between_its_lips_is_a_pit() -> None:
+    """A 1 m deep ditch 2.5 m wide (x = 4..6.5), its near strip unseen: from the far lip
+    2 m away a 20° ramp could descend 0.73 m, so the sunken rule's slope allowance
+    passes its middle; but its lips are steps and its unseen strip a hole."""
+    x, _ = FINE.centres()
+    layers = check_against_reference(terrain_from(
+        lambda x, y: np.where((x > 4.0) & (x < 6.5), -1.0, 0.0),
+        known=~((x > 4.0) & (x < 4.8))))
+    floor = rows_at(5.1, 5.9)
+    assert np.all(layers.hazard[floor] == 1.0)
+    assert flagged(layers, FLAG_SUNKEN)[floor].all()
+    assert np.all(layers.hazard[rows_at(-4.0, 3.4)] == 0.0)
