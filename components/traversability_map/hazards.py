@@ -598,7 +598,11 @@ def _below_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
     median elevation of the known cells within ``radius`` cells (a square window
     clipped at the grid's edge): below the level of the ground around them, in a pit or
     a ditch (module doc)."""
+    size = 2 * radius + 1  # only a cell with a known one a step above can pass (cheap)
+    highest = ndimage.maximum_filter(np.where(np.isnan(elev), -np.inf, elev), size,
+                                     mode="constant", cval=-np.inf)
     with np.errstate(invalid="ignore"):
+        candidates = candidates & (highest - elev >= threshold)
         below: NDArray[np.bool_] = candidates & (
             -_above_surroundings(candidates, elev, radius) >= threshold)
     return below
@@ -616,9 +620,21 @@ def _above_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
     windows = np.lib.stride_tricks.sliding_window_view(
         _padded(elev, radius, np.nan), (2 * radius + 1, 2 * radius + 1))
     i, j = where[:, 0], where[:, 1]
-    level = np.nanmedian(windows[i, j].reshape(len(where), -1), axis=1)
-    result[i, j] = elev[i, j] - level
+    result[i, j] = elev[i, j] - _nan_medians(windows[i, j].reshape(len(where), -1))
     return result
+
+
+def _nan_medians(rows: FloatArray) -> FloatArray:
+    """The median of the non-NaN values of each row (the mean of the two middle ones
+    for an even count; NaN for none): ``np.nanmedian(rows, axis=1)``, without its
+    masked-array path, which costs a millisecond a call on these small rows."""
+    ordered = np.sort(rows, axis=1)  # NaN sorts last
+    n = np.count_nonzero(~np.isnan(rows), axis=1)
+    index = np.arange(len(rows))
+    low = ordered[index, np.maximum(n - 1, 0) // 2]
+    high = ordered[index, np.maximum(n, 1) // 2 - (n == 0)]
+    medians: FloatArray = np.where(n > 0, (low + high) / 2, np.nan)
+    return medians
 
 
 def _raised_tops(elev: FloatArray, known: NDArray[np.bool_], stepped: NDArray[np.bool_],
@@ -646,6 +662,11 @@ def _raised_tops(elev: FloatArray, known: NDArray[np.bool_], stepped: NDArray[np
             with np.errstate(invalid="ignore"):
                 closed &= (~seen | (heights <= elev - threshold)).any(axis=0)
         bounded |= closed
+    size = 4 * reach + 1  # only a cell with a known one a step below can pass (cheap)
+    lowest = ndimage.minimum_filter(np.where(np.isnan(elev), np.inf, elev), size,
+                                    mode="constant", cval=np.inf)
+    with np.errstate(invalid="ignore"):
+        bounded &= elev - lowest >= threshold
     above = _above_surroundings(bounded, elev, 2 * reach)
     with np.errstate(invalid="ignore"):
         raised = bounded & (above >= threshold)
