@@ -2,8 +2,8 @@
 
 Each section runs its contenders in one process with the trials interleaved (trial 1 of
 every contender, then trial 2, ...), so drifts in machine speed hit all of them alike,
-and reports medians. Small calls are timed in batches (``inner`` calls per sample).
-Figures are printed, never asserted.
+and reports medians of CPU time (``time.process_time``). Small calls are timed in
+batches (``inner`` calls per sample). Figures are printed, never asserted.
 
 Sections:
 
@@ -60,16 +60,17 @@ Contender = tuple[str, Callable[[], object], int]  # name, call, calls per sampl
 
 
 def interleaved(contenders: list[Contender], repeat: int) -> dict[str, float]:
-    """Median seconds per call of each contender, trials interleaved."""
+    """Median seconds of CPU (``time.process_time``: steadier than wall time on a
+    machine shared with other work) per call of each contender, trials interleaved."""
     for _, call, _ in contenders:  # warm up
         call()
     samples: dict[str, list[float]] = {name: [] for name, _, _ in contenders}
     for _ in range(repeat):
         for name, call, inner in contenders:
-            start = time.perf_counter()
+            start = time.process_time()
             for _ in range(inner):
                 call()
-            samples[name].append((time.perf_counter() - start) / inner)
+            samples[name].append((time.process_time() - start) / inner)
     return {name: statistics.median(values) for name, values in samples.items()}
 
 
@@ -330,7 +331,7 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=3, help="stack: runs of each stack")
     args = parser.parse_args()
     print(f"python {sys.version.split()[0]}, numpy {np.__version__}; medians of "
-          f"{args.repeat} interleaved trials")
+          f"{args.repeat} interleaved trials, CPU time")
     for name in args.section or list(SECTIONS):
         if name == "stack":
             args.world = str(sim_world(args.world))
