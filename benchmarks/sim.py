@@ -10,6 +10,9 @@ The reference workload is ``configs/raptor.xml`` on one world, seed and duration
 - **autonomous**: every configured component (maps, planners, arbiter), the
   simulation playing the control station as ``afa run --sim`` does.
 
+(A third stack, ``maps``, the sensing stack with the three maps, is run by
+``benchmarks/maps.py --section stack`` through this script's runner.)
+
 Each run is a fresh interpreter (``--one``), so no run inherits another's caches; the
 two stacks alternate (sensing, autonomous, sensing, ...) and the medians of the trials
 are printed: the real-time factor by wall time and by CPU time of the process (the
