@@ -89,12 +89,15 @@ tests):
      ditch's lip or a ledge's top is level ground back to the vehicle. The cell
      becomes hazard 1 with goodness ``inferred_goodness ×`` the best goodness along its
      lines. Unknown cells without such evidence stay NaN (unknown, never free).
-   - *Hole rim*: a known cell next to a hole (8-neighbours) with at least half of its
-     fine cells without points joins the hole (hazard 1, and the goodness of
+   - *Hole rim*: a known cell next to a hole (8-neighbours) whose fine cells are
+     mostly (over half) without points joins the hole (hazard 1, and the goodness of
      the best hole next to it): it was seen only along an edge, like the lip strip of a
      cell that lies mostly over the ditch beyond an invisible near wall. (Its own
      goodness, small as it is, could not replace in the Global Map the "free" reading
-     of that same edge taken before the hole was inferred.)
+     of that same edge taken before the hole was inferred.) A cell exactly half seen
+     stays as seen: joining those too made the ditch crossing's ditch look longer at
+     its north end than it is, and the planner went round its far end (1.76× the
+     shortest course instead of 1.07×).
    - Known limitations: a shadow longer than ``hole_reach`` behind an obstacle whose
      face lies beyond reach of the shadow's far end can still read as a hole (against
      an obstacle that is impassable anyway); a ditch with a step (a rock, a kerb)
@@ -454,9 +457,9 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     hazard[~known] = np.nan
     hazard[hole] = 1.0
     goodness = np.where(hole, rules.inferred_goodness * hole_goodness, goodness)
-    if hole.any():  # the hole's rim: cells half or more unseen, seen along an edge
+    if hole.any():  # the hole's rim: cells mostly unseen, seen along an edge
         beside = _stacked(_padded(hole, 1, False), 1, NEIGHBOURHOOD, (rows, cols)).any(axis=0)
-        rim = known & beside & (2 * cells.fine_known <= cells.fine_total)
+        rim = known & beside & (2 * cells.fine_known < cells.fine_total)
         hazard[rim] = 1.0
         joined = _stacked(_padded(np.where(hole, goodness, 0.0), 1, 0.0), 1, NEIGHBOURHOOD,
                           (rows, cols)).max(axis=0)  # the goodness of the hole it joins

@@ -328,7 +328,7 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
     for i in range(rows):
         for j in range(cols):
             with_points, total = fine_cells.get((i, j), [0, 0])
-            if cell(i, j) is None or 2 * with_points > total:
+            if cell(i, j) is None or 2 * with_points >= total:
                 continue
             if holes[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].any():
                 out["hazard"][i, j] = 1.0  # joins the hole, with the best one's goodness
