@@ -2,8 +2,8 @@
 
 Each section runs its contenders in one process with the trials interleaved (trial 1 of
 every contender, then trial 2, ...), so drifts in machine speed hit all of them alike,
-and reports medians. Small calls are timed in batches (``inner`` calls per sample).
-Figures are printed, never asserted.
+and reports medians of CPU time (``time.process_time``). Small calls are timed in
+batches (``inner`` calls per sample). Figures are printed, never asserted.
 
 Sections:
 
@@ -16,11 +16,16 @@ Sections:
 - ``traversability``: hazards for the global (32 m at 0.5 m from 32 m at 0.2 m) and ego
   (16 m from 16 m) maps on rough terrain with obstacles, ms per event.
 - ``global``: merging a 64 x 64 traversability map into the 500 x 500 planning grid.
+- ``stack``: the whole stack under ``--fast`` (virtual time) as a real-time factor, with
+  the three maps running (the ``maps`` stack: drivers, ModelServer, Terrain,
+  Traversability and Global Map) beside the same run without them (``sensing``), both
+  following the world's drive script (``--teleop``) so that the vehicle takes the same
+  path. Each run is a fresh interpreter (``benchmarks/sim.py``'s runner and summary);
+  ``--trials`` runs of each, interleaved, medians by wall and by CPU time. Slow (about
+  15 s of CPU per run at the default 60 simulated seconds), so not run by default.
 
-Usage: ``python benchmarks/maps.py [--repeat R] [--section NAME ...]``
-
-A later section (the whole stack under ``--fast``, as a real-time factor) plugs in by
-adding a function to ``SECTIONS``.
+Usage: ``python benchmarks/maps.py [--repeat R] [--section NAME ...]
+[--world W] [--duration S] [--trials N]``
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/sim.py
 
 from components.global_map.accumulate import PlanningGrid  # noqa: E402
 from components.terrain_map.grid import (  # noqa: E402
@@ -54,16 +60,17 @@ Contender = tuple[str, Callable[[], object], int]  # name, call, calls per sampl
 
 
 def interleaved(contenders: list[Contender], repeat: int) -> dict[str, float]:
-    """Median seconds per call of each contender, trials interleaved."""
+    """Median seconds of CPU (``time.process_time``: steadier than wall time on a
+    machine shared with other work) per call of each contender, trials interleaved."""
     for _, call, _ in contenders:  # warm up
         call()
     samples: dict[str, list[float]] = {name: [] for name, _, _ in contenders}
     for _ in range(repeat):
         for name, call, inner in contenders:
-            start = time.perf_counter()
+            start = time.process_time()
             for _ in range(inner):
                 call()
-            samples[name].append((time.perf_counter() - start) / inner)
+            samples[name].append((time.process_time() - start) / inner)
     return {name: statistics.median(values) for name, values in samples.items()}
 
 
@@ -278,6 +285,32 @@ def section_global(repeat: int) -> None:
         print(f"   {name:42s} {seconds * 1e3:12.3f} ms")
 
 
+# --- the whole stack ---------------------------------------------------------------------
+
+
+def section_stack(args: argparse.Namespace) -> None:
+    import sim  # benchmarks/sim.py: one run per interpreter, and the medians
+
+    print(f"== stack: configs/raptor.xml on {Path(args.world).stem} (drive script), "
+          f"{args.duration:g} s simulated per run, {args.trials} interleaved trials, medians")
+    runs: dict[str, list[dict[str, object]]] = {"sensing": [], "maps": []}
+    for _ in range(args.trials):
+        for stack in runs:
+            runs[stack].append(sim.spawn(stack, args))
+    summary = {stack: sim.summarise(r) for stack, r in runs.items()}
+    for stack, label in (("sensing", "without the maps"), ("maps", "with the maps")):
+        r = summary[stack]
+        print(f"   {label:18s} ({r['components']:2d} components): {r['realtime_factor']:7.2f}x "
+              f"real time by wall clock {r['realtime_factor_range']}, "
+              f"{r['cpu_realtime_factor']:7.2f}x by CPU time {r['cpu_realtime_factor_range']}; "
+              f"{r['cpu_s']:.2f} s of CPU")
+    extra = summary["maps"]["cpu_s"] - summary["sensing"]["cpu_s"]
+    print(f"   the maps cost {extra:.2f} s of CPU over {summary['maps']['sim_time_s']:g} "
+          f"simulated seconds: {1e3 * extra / summary['maps']['sim_time_s']:.1f} ms of CPU "
+          f"per simulated second (medians' difference)")
+
+
+#: Sections taking the trial count (``--repeat``); ``stack`` takes the parsed arguments.
 SECTIONS: dict[str, Callable[[int], None]] = {
     "fusion": section_fusion,
     "scroll": section_scroll,
@@ -289,13 +322,29 @@ SECTIONS: dict[str, Callable[[int], None]] = {
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=15, help="trials per contender")
-    parser.add_argument("--section", action="append", choices=sorted(SECTIONS),
-                        help="run only these sections (repeatable)")
+    parser.add_argument("--section", action="append", choices=[*sorted(SECTIONS), "stack"],
+                        help="run only these sections (repeatable; default: all but stack)")
+    parser.add_argument("--world", default="rock-field", help="stack: a shipped world")
+    parser.add_argument("--seed", type=int, default=0, help="stack: the simulation's seed")
+    parser.add_argument("--duration", type=float, default=60.0,
+                        help="stack: simulated seconds per run")
+    parser.add_argument("--trials", type=int, default=3, help="stack: runs of each stack")
     args = parser.parse_args()
     print(f"python {sys.version.split()[0]}, numpy {np.__version__}; medians of "
-          f"{args.repeat} interleaved trials")
+          f"{args.repeat} interleaved trials, CPU time")
     for name in args.section or list(SECTIONS):
-        SECTIONS[name](args.repeat)
+        if name == "stack":
+            args.world = str(sim_world(args.world))
+            section_stack(args)
+        else:
+            SECTIONS[name](args.repeat)
+
+
+def sim_world(name: str) -> Path:
+    """A shipped world's file (as benchmarks/sim.py resolves it)."""
+    import sim
+
+    return sim.world_path(name)
 
 
 if __name__ == "__main__":

@@ -10,6 +10,9 @@ The reference workload is ``configs/raptor.xml`` on one world, seed and duration
 - **autonomous**: every configured component (maps, planners, arbiter), the
   simulation playing the control station as ``afa run --sim`` does.
 
+(A third stack, ``maps``, the sensing stack with the three maps, is run by
+``benchmarks/maps.py --section stack`` through this script's runner.)
+
 Each run is a fresh interpreter (``--one``), so no run inherits another's caches; the
 two stacks alternate (sensing, autonomous, sensing, ...) and the medians of the trials
 are printed: the real-time factor by wall time and by CPU time of the process (the
@@ -53,6 +56,13 @@ sys.path.insert(0, str(ROOT))
 #: The Launcher types of the sensing stack: the device drivers and ModelServer.
 SENSING_TYPES = ("NodLaser", "Stereo", "Imu", "GpsSokkia", "WheelOdometry", "VehicleControl",
                  "ModelServer")
+#: The Launcher types of each stack a run may use (None: every configured component).
+#: ``maps`` is the sensing stack with the three maps (benchmarks/maps.py compares the two).
+STACK_TYPES: dict[str, tuple[str, ...] | None] = {
+    "sensing": SENSING_TYPES,
+    "maps": (*SENSING_TYPES, "TerrainMap", "TraversabilityMap", "GlobalMap"),
+    "autonomous": None,
+}
 TARGETS = {"sensing": 20.0, "autonomous": 10.0}
 CONFIG = ROOT / "configs" / "raptor.xml"
 
@@ -62,11 +72,12 @@ def world_path(name: str) -> Path:
     return path if path.suffix == ".xml" else ROOT / "configs" / "worlds" / f"{name}.xml"
 
 
-def sensing_components() -> list[str]:
+def stack_components(types: tuple[str, ...]) -> list[str]:
+    """The names of the enabled Launcher entries of these types."""
     from afa.config.loader import load_configuration
 
     entries = load_configuration(CONFIG).launcher.Components
-    return [e.Name for e in entries if e.Enabled and e.Type in SENSING_TYPES]
+    return [e.Name for e in entries if e.Enabled and e.Type in types]
 
 
 # -- one run (in its own interpreter) -------------------------------------------------------
@@ -78,10 +89,11 @@ async def _run(stack: str, world: Path, seed: int, duration: float,
     from components.simulation import RaptorSimulation
 
     options: dict[str, Any] = {}
-    if stack == "sensing":
-        options["only"] = sensing_components()
+    types = STACK_TYPES[stack]
+    if types is not None:  # a partial stack follows the drive script
+        options["only"] = stack_components(types)
     simulation = RaptorSimulation.from_xml(CONFIG, world, clock=VirtualClock(), seed=seed,
-                                           teleop=stack == "sensing", **options)
+                                           teleop=types is not None, **options)
     wall, cpu = time.perf_counter(), time.process_time()
     if sampler is not None:
         sampler.start()
@@ -283,7 +295,7 @@ def main() -> None:
                         help="one more, sampled run of the autonomous stack: CPU per owner")
     parser.add_argument("--rays", action="store_true", help="ray casting costs too")
     parser.add_argument("--json", action="store_true")
-    parser.add_argument("--one", choices=("sensing", "autonomous"), help=argparse.SUPPRESS)
+    parser.add_argument("--one", choices=tuple(STACK_TYPES), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
         one(args.one, world_path(args.world), args.seed, args.duration, args.components)

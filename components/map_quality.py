@@ -10,21 +10,29 @@ returns::
                  "rms_height_error_ground_m": ..., "height_offset_m": ...,
                  "rms_height_error_centred_m": ...},
      "hazards": {"map": "GlobalMapService", "obstacle_cells": ..., "detected_cells": ...,
-                 "detection_fraction": ..., "unobserved_obstacle_cells": ...,
-                 "detection_fraction_observed": ..., "free_observed_cells": ...,
+                 "unobserved_obstacle_cells": ..., "detection_fraction": ...,
+                 "detection_fraction_in_range": ..., "obstacles": ...,
+                 "unobserved_obstacles": ..., "detected_obstacles": ...,
+                 "obstacle_detection_fraction": ...,
+                 "obstacle_detection_fraction_in_range": ..., "free_observed_cells": ...,
                  "false_hazard_cells": ..., "false_hazard_fraction": ...},
      "track_points": ..., "detection_range_m": 8.0,
-     "targets": {"detection_fraction": 0.95, "false_hazard_fraction": 0.01}}
+     "targets": {"detection_fraction": 0.95, "obstacle_detection_fraction": 0.95,
+                 "false_hazard_fraction": 0.01}}
 
 with the definitions of :mod:`components.traversability_map.quality` (obstacle cells:
 traversability cells at least half covered by samples an obstacle raises or lowers by
 0.3 m or more, within 8 m of the track; detected: hazard 1; unobserved: obstacle cells
-the map holds nothing for, never in the sensors' view; false hazards: hazard 1 on an
-observed cell with no obstacle sample within one cell). The terrain figures are of the
-Terrain Map's latest map (32 m around where the vehicle stopped); the hazard figures of
-the Global Map's cumulative map (the whole run), or without one of the Traversability
-Map's latest map. A map that does not exist or never published is ``null``; one that
-cannot be scored (its track lies off the world's terrain) holds an ``error``.
+the map holds nothing for, never in any sensor's view, reported apart: the detection
+fractions are of the cells *within sensor range*, within 8 m and seen, and the
+``…_in_range`` ones count the never seen as missed; obstacles: each obstacle over the
+cells holding any of its samples, detected when one of its cells within 8 m is; false
+hazards: hazard 1 on an observed cell with no obstacle sample within one cell). The
+terrain figures are of the Terrain Map's latest map (32 m around where the vehicle
+stopped); the hazard figures of the Global Map's cumulative map (the whole run), or
+without one of the Traversability Map's latest map. A map that does not exist or never
+published is ``null``; one that cannot be scored (its track lies off the world's
+terrain) holds an ``error``.
 
 Frames. The maps are in the pose frame: metres east, north and up of ``initialUTM`` (the
 first GPS fix) along the UTM grid. The simulator's truth is in the tangent plane at the
@@ -53,7 +61,8 @@ __all__ = ["map_summary", "MapFrame", "truth_in_map_frame", "DETECTION_RANGE", "
 #: Obstacle cells within this distance (m) of the track count (the laser's reach).
 DETECTION_RANGE = 8.0
 #: Issue 11's targets, reported beside the figures.
-TARGETS = {"detection_fraction": 0.95, "false_hazard_fraction": 0.01}
+TARGETS = {"detection_fraction": 0.95, "obstacle_detection_fraction": 0.95,
+           "false_hazard_fraction": 0.01}
 #: Truth is resampled this far (m) around the track: beyond the maps' reach.
 TRUTH_MARGIN = 25.0
 
@@ -125,7 +134,8 @@ def truth_in_map_frame(terrain: Any, frame: MapFrame, x_range: tuple[float, floa
     i = np.clip(np.rint((east - world.east0) / res).astype(np.intp), 0, nx - 1)
     j = np.clip(np.rint((north - world.north0) / res).astype(np.intp), 0, ny - 1)
     surface = world.surface[j, i].astype(np.float64) + frame.dz
-    return GroundTruth(float(x[0]), float(y[0]), res, surface, world.obstacle[j, i])
+    ids = None if world.ids is None else world.ids[j, i]
+    return GroundTruth(float(x[0]), float(y[0]), res, surface, world.obstacle[j, i], ids)
 
 
 def _figures(quality: MapQuality, *, terrain: bool) -> dict[str, Any]:
@@ -140,9 +150,15 @@ def _figures(quality: MapQuality, *, terrain: bool) -> dict[str, Any]:
                 "rms_height_error_centred_m": number(quality.rms_height_error_centred)}
     return {"obstacle_cells": quality.obstacle_cells,
             "detected_cells": quality.detected_cells,
-            "detection_fraction": number(quality.detection_fraction),
             "unobserved_obstacle_cells": quality.unobserved_obstacle_cells,
-            "detection_fraction_observed": number(quality.detection_fraction_observed),
+            "detection_fraction": number(quality.detection_fraction),
+            "detection_fraction_in_range": number(quality.detection_fraction_in_range),
+            "obstacles": quality.obstacles,
+            "unobserved_obstacles": quality.unobserved_obstacles,
+            "detected_obstacles": quality.detected_obstacles,
+            "obstacle_detection_fraction": number(quality.obstacle_detection_fraction),
+            "obstacle_detection_fraction_in_range":
+                number(quality.obstacle_detection_fraction_in_range),
             "free_observed_cells": quality.free_observed_cells,
             "false_hazard_cells": quality.false_hazard_cells,
             "false_hazard_fraction": number(quality.false_hazard_fraction, 5)}

@@ -9,7 +9,17 @@ script (``--teleop``, so the pictures do not depend on the planners), and draws
   per 0.5 m cell) at the same moment;
 - ``maps-global.png``: the Global Map's planning cost at the end of the run over the
   ground the vehicle saw, with the vehicle's track and the world's obstacles outlined
-  (ground truth, resampled into the map frame).
+  (ground truth, resampled into the map frame);
+- ``maps-ego.png``: the Terrain Map's ego map at ``--at`` seconds in its own,
+  heading-aligned frame (ahead up, left to the left), beside the global map with the
+  ego map's footprint drawn where its ``mapPose`` places it;
+- ``maps-cell-stats.png``: the Terrain Map's per-cell statistics at ``--at`` seconds:
+  minimum and maximum point height and the variance of the heights;
+- ``maps-global-layers.png``: the Global Map's two cost layers at the end: the *a
+  priori* layer (operator knowledge; for the picture an a-priori cost of 3 is set on a
+  10 m x 6 m patch through ``setPlanningMap``'s core, ``PlanningGrid.set_a_priori``,
+  after the drive, which does not change the sensed layer), the *sensed* layer, and the
+  planning cost the planner reads (sensed where sensed, else a priori).
 
 Every map is drawn in its own frame, the pose frame: metres east (x) and north (y) of
 the first GPS fix. Usage (matplotlib needed: ``pip install -e '.[docs]'``)::
@@ -57,6 +67,7 @@ async def simulate(world: str, at: float, seed: int) -> dict[str, Any]:
         system = simulation.system
         await system.run(at)
         terrain = component(system, TerrainMap).latest_map.get()
+        ego = component(system, TerrainMap).latest_ego.get()
         trav = component(system, TraversabilityMap).latest_map.get()
         vehicle = (simulation.state.east, simulation.state.north)
         limit = simulation.time_limit or 120.0
@@ -68,11 +79,28 @@ async def simulate(world: str, at: float, seed: int) -> dict[str, Any]:
         await asyncio.gather(runner, finished, return_exceptions=True)
         global_map = component(system, GlobalMap)
         summary = simulation.summary()
-        return {"terrain": terrain, "trav": trav, "vehicle_at": vehicle,
-                "cost": global_map.grid.cost(), "sensed": global_map.grid.sensed.copy(),
+        sensed_cost = global_map.grid.sensed_cost.copy()
+        sensed = global_map.grid.sensed.copy()
+        a_priori_patch(global_map, simulation)
+        return {"terrain": terrain, "trav": trav, "ego": ego, "vehicle_at": vehicle,
+                "cost": global_map.grid.cost(), "sensed": sensed,
+                "a_priori": global_map.grid.a_priori.copy(), "sensed_cost": sensed_cost,
                 "geometry": global_map.grid.geometry, "initial_utm": global_map.initial_utm,
                 "track": np.array(simulation.track), "simulation": simulation,
                 "maps": summary["maps"], "world": world}
+
+
+def a_priori_patch(global_map: Any, simulation: Any) -> None:
+    """An example of operator knowledge for the a-priori picture: cost 3 on a 10 m x 6 m
+    patch whose corner lies on the track's midpoint."""
+    grid, track = global_map.grid, list(simulation.track)
+    frame = MapFrame.of(simulation.world.origin, global_map.initial_utm)
+    x, y = frame.to_map(*track[len(track) // 2])
+    i0, j0 = grid.world_to_cell(x, y)
+    cells = round(10.0 / grid.geometry.gridsize), round(6.0 / grid.geometry.gridsize)
+    i, j = np.meshgrid(np.arange(i0, i0 + cells[0]), np.arange(j0, j0 + cells[1]),
+                       indexing="ij")
+    grid.set_a_priori(i, j, 3.0)
 
 
 def extent(layer_map: Any) -> list[float]:
@@ -194,6 +222,86 @@ def draw(run: dict[str, Any], out: Path) -> list[Path]:
                  f"{hazards['false_hazard_cells']}/{hazards['free_observed_cells']}",
                  fontsize=9)
     finish(fig, "maps-global.png")
+
+    # -- the ego map -------------------------------------------------------------------
+    ego = run["ego"]
+    fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.8), constrained_layout=True,
+                             gridspec_kw={"width_ratios": [1.0, 1.25]})
+    g = ego.gridsize
+    ahead = [ego.originX, ego.originX + ego.rows * g]
+    left = [ego.originY, ego.originY + ego.cols * g]
+    # rows run ahead (drawn up), columns to the left (drawn leftwards: the x axis flipped)
+    image = axes[0].imshow(np.ma.masked_invalid(ego.elevation), origin="lower",
+                           extent=[left[0], left[1], ahead[0], ahead[1]],
+                           cmap=grey_bad("terrain"), interpolation="nearest")
+    axes[0].set_xlim(left[1], left[0])
+    axes[0].plot([0.0], [0.0], marker="^", color="magenta", ms=8)
+    axes[0].set_xlabel("y to the left (m)")
+    axes[0].set_ylabel("x ahead of the front bumper (m)")
+    axes[0].set_title(f"ego map: heading-aligned ({g:g} m cells)")
+    fig.colorbar(image, ax=axes[0], label="height above the bumper's ground (m)", shrink=0.85)
+    heights = np.ma.masked_invalid(terrain.elevation.T)
+    image = axes[1].imshow(heights, origin="lower", extent=extent(terrain),
+                           cmap=grey_bad("terrain"), interpolation="nearest")
+    pose = np.asarray(ego.mapPose)
+    corners = np.array([[ahead[0], left[0]], [ahead[1], left[0]], [ahead[1], left[1]],
+                        [ahead[0], left[1]], [ahead[0], left[0]]])
+    footprint = corners @ pose[:2, :2].T + pose[:2, 3]  # mapPose: into the pose frame
+    axes[1].plot(footprint[:, 0], footprint[:, 1], color="magenta", lw=1.2,
+                 label="ego map (mapPose)")
+    vehicle(axes[1])
+    axes[1].set_xlim(extent(terrain)[:2])
+    axes[1].set_ylim(extent(terrain)[2:])
+    axes[1].set_title("global terrain map (north-up) and the ego map's footprint")
+    axes[1].legend(loc="lower left", fontsize=8)
+    fig.colorbar(image, ax=axes[1], label="mean height (m)", shrink=0.85)
+    finish(fig, "maps-ego.png")
+
+    # -- cell statistics ---------------------------------------------------------------
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.4), constrained_layout=True)
+    known = terrain.pointCount.T > 0
+    low = np.ma.masked_where(~known, terrain.minHeight.T)
+    high = np.ma.masked_where(~known, terrain.maxHeight.T)
+    levels = (float(np.ma.min(low)), float(np.ma.max(high)))
+    for ax, layer, title in ((axes[0], low, "minimum height"), (axes[1], high,
+                                                                 "maximum height")):
+        image = ax.imshow(layer, origin="lower", extent=extent(terrain), vmin=levels[0],
+                          vmax=levels[1], cmap=grey_bad("terrain"), interpolation="nearest")
+        fig.colorbar(image, ax=ax, label=f"{title} (m)", shrink=0.8)
+        ax.set_title(f"Terrain Map: {title} per cell")
+    variance = np.ma.masked_where(~known | (terrain.variance.T <= 0), terrain.variance.T)
+    image = axes[2].imshow(variance, origin="lower", extent=extent(terrain),
+                           cmap=grey_bad("magma"), norm=colors.LogNorm(vmin=1e-5, vmax=1.0),
+                           interpolation="nearest")
+    fig.colorbar(image, ax=axes[2], label="variance of point heights (m²)", shrink=0.8)
+    axes[2].set_title("Terrain Map: height variance per cell")
+    for ax in axes:
+        vehicle(ax)
+        ax.set_xlim(extent(terrain)[:2])
+        ax.set_ylim(extent(terrain)[2:])
+    finish(fig, "maps-cell-stats.png")
+
+    # -- the Global Map's layers -------------------------------------------------------
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, max(3.2, height * 0.55)),
+                             constrained_layout=True)
+    window = (slice(i0, i1), slice(j0, j1))
+    layers = (("a priori cost", run["a_priori"][window].T),
+              ("sensed cost (grey: never sensed)",
+               np.where(sensed[window].T, run["sensed_cost"][window].T, np.nan)),
+              ("planning cost: sensed, else a priori", run["cost"][window].T))
+    for ax, (title, layer) in zip(axes, layers, strict=True):
+        shown = np.ma.masked_invalid(np.where(np.isinf(layer), 1e6, layer))
+        image = ax.imshow(shown, origin="lower", extent=box, cmap=cost_cmap,
+                          norm=colors.LogNorm(vmin=1.0, vmax=10.0), interpolation="nearest")
+        ax.plot(track_x, track_y, color="black", lw=0.6, alpha=0.6)
+        ax.set_xlim(box[:2])
+        ax.set_ylim(box[2:])
+        ax.set_aspect("equal")
+        ax.set_title(f"Global Map: {title}", fontsize=9)
+        ax.set_xlabel("x east (m)")
+    axes[0].set_ylabel("y north (m)")
+    fig.colorbar(image, ax=axes, label="cost (black: impassable)", extend="max", shrink=0.8)
+    finish(fig, "maps-global-layers.png")
     return written
 
 

@@ -22,7 +22,15 @@ tests):
    surrounding ground (the median elevation of the known cells within ``2·r`` cells,
    ``r`` as in 5): the foot of a ditch's wall, never the open ground in front of a rock
    (marking both sides grew a 0.6 m trunk into a 2 m obstacle, which closed the gaps of
-   a forest; Obstacle Avoidance adds the vehicle's own radius). With
+   a forest; Obstacle Avoidance adds the vehicle's own radius). The *top* of a low,
+   wide obstacle seen from one side has no lower neighbour in view (its near face is
+   in the rim cells, its far side in shadow) and would read as a level plateau; a
+   known cell is a step too when it lies within ``r`` cells of a step cell, is
+   *bounded* (along some axis each side holds, within ``r`` cells, a cell a step lower
+   or an unknown cell: the ground beyond a ditch's lip runs on level towards the
+   vehicle and is not bounded), lies a step above the surrounding ground (the median
+   as above; its step is that height) and is joined to a step cell through such cells
+   (8-connected). A smooth hill's top has no step cell to join. With
    ``StepPercent`` 0 the hazard is binary, 1 when ``step >= T``; with ``StepPercent``
    1 it is graded, ``min(1, step / T)``: the step "as a percentage" of ``Stepheight``
    (which stays in millimetres).
@@ -58,6 +66,12 @@ tests):
      this a 3 m gate in a wall was a sunken line across the gate). A ditch wider than
      the window is mostly floor and keeps its marked lips (the step rule's higher side)
      and holes.
+   - *Walled pit* (known): along some axis each side holds, within ``r`` cells, a wall
+     (a step cell or a hole), and the cell lies a step below the surrounding ground (as
+     above). The legal-slope allowance of the sunken rule is ``s·d``: 0.73 m from a
+     bank 2 m away, so the middle of a 1 m deep, 2.5 m wide ditch passed as "reachable
+     down a 20° ramp" although the cells between are its flat floor and its wall. A
+     ramp has no step cell; a ditch's lips are steps and its unseen parts holes.
    - *Hole* (unknown cell): along some axis, let ``b±`` be the nearest known cell on
      each side (both must exist), ``t`` the *trend*, the flatter of their fitted
      slopes (tan, at most the limit's), ``bank = elevation(b) - t·d_b`` on each side
@@ -76,16 +90,23 @@ tests):
      becomes hazard 1 with goodness ``inferred_goodness ×`` the best goodness along its
      lines. Unknown cells without such evidence stay NaN (unknown, never free).
    - *Hole rim*: a known cell next to a hole (8-neighbours) whose fine cells are
-     mostly (over half) without points joins the hole (hazard 1, goodness
-     ``inferred_goodness ×`` its own): it was seen only along an edge, like the lip
-     strip of a cell that lies mostly over the ditch beyond an invisible near wall.
+     mostly (over half) without points joins the hole (hazard 1, and the goodness of
+     the best hole next to it): it was seen only along an edge, like the lip strip of a
+     cell that lies mostly over the ditch beyond an invisible near wall. (Its own
+     goodness, small as it is, could not replace in the Global Map the "free" reading
+     of that same edge taken before the hole was inferred.) A cell exactly half seen
+     stays as seen: joining those too made the ditch crossing's ditch look longer at
+     its north end than it is, and the planner went round its far end (1.76× the
+     shortest course instead of 1.07×).
    - Known limitations: a shadow longer than ``hole_reach`` behind an obstacle whose
      face lies beyond reach of the shadow's far end can still read as a hole (against
      an obstacle that is impassable anyway); a ditch with a step (a rock, a kerb)
      within reach of its lip on every line is not marked from that lip; a ditch
      wider than ``2·hole_reach`` keeps an unknown middle, enclosed by its marked rim.
-6. **Goodness** ``= (1 - exp(-n / goodness_points)) · exp(-age / goodness_time) · a``:
-   how much data (n points), how recent (age = now - last seen; 1 if unknown), and how
+6. **Goodness** ``= (1 - exp(-n / goodness_points)) · f · exp(-age / goodness_time) · a``:
+   how much data (n points, and the fraction ``f`` of the cell's fine cells that hold
+   them: a cell seen along one edge, such as the lip of a ditch, says little about the
+   rest of it), how recent (age = now - last seen; 1 if unknown), and how
    accurate (``a = min(1, 1 / Farfieldscale)`` in the far field, else 1). Unknown
    cells have goodness 0. The Global Map compares goodness to decide which
    observation of a cell to keep.
@@ -102,6 +123,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import ndimage
 
 from components.terrain_map.grid import GridGeometry, TerrainLayers
 
@@ -401,6 +423,10 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
                                                            upper)), np.nan)
     with np.errstate(invalid="ignore"):
         step_full = known & (step >= threshold)
+    if reach >= 1:  # the top of a low, wide obstacle: no lower neighbour in view
+        top, above = _raised_tops(elev, known, step_full, threshold, reach)
+        step = np.where(top, np.maximum(step, above), step)
+        step_full |= top
     if rules.step_percent:
         step_hazard = np.minimum(step / threshold, 1.0)
     else:
@@ -420,6 +446,7 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     if rules.step_on and reach >= 1:
         sunken, hole, hole_goodness = _negative_obstacles(
             elev, low, goodness, known, step_full, slope, tan_limit, threshold, g, reach)
+        sunken |= _walled_pits(known, step_full | hole, elev, threshold, reach)
 
     hazard = np.zeros((rows, cols))
     if rules.step_on:
@@ -430,11 +457,13 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     hazard[~known] = np.nan
     hazard[hole] = 1.0
     goodness = np.where(hole, rules.inferred_goodness * hole_goodness, goodness)
-    if hole.any():  # the hole's rim: cells mostly unseen, seen only along an edge
+    if hole.any():  # the hole's rim: cells mostly unseen, seen along an edge
         beside = _stacked(_padded(hole, 1, False), 1, NEIGHBOURHOOD, (rows, cols)).any(axis=0)
         rim = known & beside & (2 * cells.fine_known < cells.fine_total)
         hazard[rim] = 1.0
-        goodness = np.where(rim, rules.inferred_goodness * goodness, goodness)
+        joined = _stacked(_padded(np.where(hole, goodness, 0.0), 1, 0.0), 1, NEIGHBOURHOOD,
+                          (rows, cols)).max(axis=0)  # the goodness of the hole it joins
+        goodness = np.where(rim, joined, goodness)
         hole |= rim
 
     flags = np.where(far, FLAG_FAR, 0).astype(np.uint8)
@@ -453,6 +482,8 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
 def _goodness(cells: CoarseCells, rules: HazardRules, known: NDArray[np.bool_],
               far: NDArray[np.bool_], now: float) -> FloatArray:
     quantity = 1.0 - np.exp(-cells.count / rules.goodness_points)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a cell seen in part
+        quantity *= np.where(cells.fine_total > 0, cells.fine_known / cells.fine_total, 0.0)
     age = np.where(np.isnan(cells.last_seen), 0.0, np.maximum(now - cells.last_seen, 0.0))
     recency = np.exp(-age / rules.goodness_time)
     accuracy = np.where(far, rules.far_accuracy, 1.0)
@@ -547,22 +578,105 @@ def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
     return _below_surroundings(sunken, elev, threshold, 2 * reach), hole, hole_goodness
 
 
+def _walled_pits(candidates: NDArray[np.bool_], walls: NDArray[np.bool_], elev: FloatArray,
+                 threshold: FloatArray, reach: int) -> NDArray[np.bool_]:
+    """The candidates with, along some axis, a wall (a step cell or a hole) within
+    ``reach`` cells on each side, lying a step below the surrounding ground
+    (:func:`_below_surroundings`): the floor of a ditch between its lips (module doc,
+    5)."""
+    shape = elev.shape
+    padded = _padded(walls, reach, False)
+    enclosed = np.zeros(shape, dtype=bool)
+    for di, dj in AXES:
+        both = candidates.copy()
+        for sign in (1, -1):
+            both &= _line(padded, reach, sign * di, sign * dj, reach, shape).any(axis=0)
+        enclosed |= both
+    return _below_surroundings(enclosed, elev, threshold, 2 * reach)
+
+
 def _below_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
                         threshold: FloatArray, radius: int) -> NDArray[np.bool_]:
     """The candidates (known cells) lying a step (``threshold``) or more below the
     median elevation of the known cells within ``radius`` cells (a square window
     clipped at the grid's edge): below the level of the ground around them, in a pit or
     a ditch (module doc)."""
-    result = np.zeros_like(candidates)
+    size = 2 * radius + 1  # only a cell with a known one a step above can pass (cheap)
+    highest = ndimage.maximum_filter(np.where(np.isnan(elev), -np.inf, elev), size,
+                                     mode="constant", cval=-np.inf)
+    with np.errstate(invalid="ignore"):
+        candidates = candidates & (highest - elev >= threshold)
+        below: NDArray[np.bool_] = candidates & (
+            -_above_surroundings(candidates, elev, radius) >= threshold)
+    return below
+
+
+def _above_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
+                        radius: int) -> FloatArray:
+    """How far each candidate (a known cell) lies above the median elevation of the
+    known cells within ``radius`` cells (a square window clipped at the grid's edge),
+    the level of the ground around it; NaN elsewhere."""
+    result = np.full(elev.shape, np.nan)
     where = np.argwhere(candidates)
     if len(where) == 0:
         return result
     windows = np.lib.stride_tricks.sliding_window_view(
         _padded(elev, radius, np.nan), (2 * radius + 1, 2 * radius + 1))
     i, j = where[:, 0], where[:, 1]
-    level = np.nanmedian(windows[i, j].reshape(len(where), -1), axis=1)
-    result[i, j] = level - elev[i, j] >= threshold[i, j]
+    result[i, j] = elev[i, j] - _nan_medians(windows[i, j].reshape(len(where), -1))
     return result
+
+
+def _nan_medians(rows: FloatArray) -> FloatArray:
+    """The median of the non-NaN values of each row (the mean of the two middle ones
+    for an even count; NaN for none): ``np.nanmedian(rows, axis=1)``, without its
+    masked-array path, which costs a millisecond a call on these small rows."""
+    ordered = np.sort(rows, axis=1)  # NaN sorts last
+    n = np.count_nonzero(~np.isnan(rows), axis=1)
+    index = np.arange(len(rows))
+    low = ordered[index, np.maximum(n - 1, 0) // 2]
+    high = ordered[index, np.maximum(n, 1) // 2 - (n == 0)]
+    medians: FloatArray = np.where(n > 0, (low + high) / 2, np.nan)
+    return medians
+
+
+def _raised_tops(elev: FloatArray, known: NDArray[np.bool_], stepped: NDArray[np.bool_],
+                 threshold: FloatArray, reach: int) -> tuple[NDArray[np.bool_], FloatArray]:
+    """The tops of obstacles that the step rule cannot see (module doc, 2): known cells
+    without a step of their own, within ``reach`` cells of a step cell, *bounded* (along
+    some axis each side holds, within ``reach``, a cell a step lower or an unknown one),
+    lying a step above the surrounding ground (:func:`_above_surroundings` over
+    ``2·reach``), and joined to a step cell through such cells (8-connected). Returns
+    the tops and their height above the surroundings (NaN elsewhere)."""
+    shape = elev.shape
+    none = np.zeros(shape, dtype=bool)
+    ring = np.ones((3, 3), dtype=bool)
+    near = known & ~stepped & ndimage.binary_dilation(stepped, ring, iterations=reach)
+    if not near.any():
+        return none, np.full(shape, np.nan)
+    padded_elev = _padded(elev, reach, np.nan)
+    padded_known = _padded(known, reach, False)
+    bounded = none.copy()
+    for di, dj in AXES:
+        closed = near.copy()
+        for sign in (1, -1):
+            heights = _line(padded_elev, reach, sign * di, sign * dj, reach, shape)
+            seen = _line(padded_known, reach, sign * di, sign * dj, reach, shape)
+            with np.errstate(invalid="ignore"):
+                closed &= (~seen | (heights <= elev - threshold)).any(axis=0)
+        bounded |= closed
+    size = 4 * reach + 1  # only a cell with a known one a step below can pass (cheap)
+    lowest = ndimage.minimum_filter(np.where(np.isnan(elev), np.inf, elev), size,
+                                    mode="constant", cval=np.inf)
+    with np.errstate(invalid="ignore"):
+        bounded &= elev - lowest >= threshold
+    above = _above_surroundings(bounded, elev, 2 * reach)
+    with np.errstate(invalid="ignore"):
+        raised = bounded & (above >= threshold)
+    labels, _ = ndimage.label(raised | stepped, ring)
+    joined = np.unique(labels[stepped])
+    tops: NDArray[np.bool_] = raised & np.isin(labels, joined[joined > 0])
+    return tops, above
 
 
 class TraversabilityMapper:

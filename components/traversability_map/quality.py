@@ -21,9 +21,20 @@ identity, as a map event's ``mapPose``):
 - **Obstacle cells**: coverage ≥ ``obstacle_coverage`` (0.5: cells mostly obstacle)
   and centre within ``detection_range`` (8 m, the laser's reach) of some point of
   the track. **Detected**: hazard ≥ ``hazard_threshold`` (1: untraversable).
-  **Unobserved**: obstacle cells the map holds nothing for (NaN): within reach of the
-  track but never in the sensors' view (behind the start, in another obstacle's
-  shadow); ``detection_fraction_observed`` leaves them out.
+  **Unobserved** (never seen): obstacle cells the map holds nothing for (NaN): within
+  reach of the track but never in any sensor's view (behind the start, in another
+  obstacle's shadow). An obstacle cell is *within sensor range* when it is within
+  reach of the track **and** seen: ``detection_fraction`` is detected / (obstacle cells
+  − unobserved), the issue's figure; ``detection_fraction_in_range`` counts the never
+  seen cells as missed too. (Seen means the map holds a reading: points fell in the
+  cell, or it was inferred a hole from points around it.)
+- **Obstacles** (with ``GroundTruth.ids``): each obstacle over every cell holding any
+  of its samples (a 0.3 m post covers no cell by half, yet it is an obstacle). An
+  obstacle is *in range* when one of those cells has its centre within
+  ``detection_range`` of the track, *seen* when one of its in-range cells is observed,
+  and *detected* when one of its in-range cells is a hazard:
+  ``obstacle_detection_fraction`` is detected / seen obstacles,
+  ``obstacle_detection_fraction_in_range`` detected / in-range obstacles.
 - **Free observed cells**: observed (``observed``, default: hazard not NaN) and no
   obstacle sample in the cell or within ``margin_cells`` cells of it. The margin is a
   don't-care band: the step rule marks both sides of a face, so the ground cell
@@ -69,6 +80,9 @@ class GroundTruth:
     resolution: float
     surface: NDArray[np.floating[Any]]
     obstacle: NDArray[np.bool_]
+    #: the index of the obstacle each sample belongs to (-1 where ``obstacle`` is
+    #: false); None when unknown (no per-obstacle figures then)
+    ids: NDArray[np.integer[Any]] | None = None
 
     @classmethod
     def from_terrain(cls, terrain: Any, *, min_height: float = 0.3, min_depth: float = 0.3,
@@ -83,7 +97,8 @@ class GroundTruth:
         if only is not None:
             significant &= np.isin(ids, list(only))
         return cls(float(terrain.east0), float(terrain.north0), float(terrain.resolution),
-                   np.asarray(terrain.surface), significant)
+                   np.asarray(terrain.surface), significant,
+                   np.where(significant, ids, -1).astype(np.int32))
 
     def coordinates(self) -> tuple[FloatArray, FloatArray]:
         """World (east, north) of every sample, flattened in ``[j, i]`` order."""
@@ -105,9 +120,14 @@ class MapQuality:
     rms_height_error_centred: float
     obstacle_cells: int
     detected_cells: int
-    detection_fraction: float
     unobserved_obstacle_cells: int
-    detection_fraction_observed: float
+    detection_fraction: float
+    detection_fraction_in_range: float
+    obstacles: int
+    unobserved_obstacles: int
+    detected_obstacles: int
+    obstacle_detection_fraction: float
+    obstacle_detection_fraction_in_range: float
     free_observed_cells: int
     false_hazard_cells: int
     false_hazard_fraction: float
@@ -151,6 +171,44 @@ def _fraction(part: int, whole: int) -> float:
     return part / whole if whole else math.nan
 
 
+def _near_track(cells: NDArray[np.intp], geometry: GridGeometry, map_pose: ArrayLike | None,
+                path: FloatArray, reach: float) -> NDArray[np.bool_]:
+    """Which of the cells ``(n, 2)`` have their centre within ``reach`` of the track."""
+    near = np.zeros(len(cells), dtype=bool)
+    if not len(cells):
+        return near
+    cx, cy = geometry.cell_center(cells[:, 0], cells[:, 1])
+    if map_pose is not None:
+        pose = np.asarray(map_pose, dtype=np.float64)
+        cx, cy = (pose[0, 0] * cx + pose[0, 1] * cy + pose[0, 3],
+                  pose[1, 0] * cx + pose[1, 1] * cy + pose[1, 3])
+    for start in range(0, len(cells), 1024):  # (1024, track) distances at a time
+        block = slice(start, start + 1024)
+        d2 = ((cx[block, None] - path[None, :, 0]) ** 2
+              + (cy[block, None] - path[None, :, 1]) ** 2)
+        near[block] = d2.min(axis=1) <= reach ** 2
+    return near
+
+
+def _per_obstacle(truth: GroundTruth, flat: NDArray[np.intp], inside: NDArray[np.bool_],
+                  geometry: GridGeometry, map_pose: ArrayLike | None, path: FloatArray,
+                  reach: float, seen: NDArray[np.bool_], hazardous: NDArray[np.bool_]
+                  ) -> tuple[int, int, int]:
+    """(obstacles in range, of them never seen, of them detected): see the module doc."""
+    if truth.ids is None:
+        return 0, 0, 0
+    ids = truth.ids.ravel()
+    mine = inside & (ids >= 0)
+    pairs = np.unique(np.column_stack([ids[mine], flat[mine]]), axis=0)  # (obstacle, cell)
+    cells = np.column_stack(np.unravel_index(pairs[:, 1], geometry.shape))
+    near = _near_track(cells, geometry, map_pose, path, reach)
+    obstacle, cell = pairs[near, 0], pairs[near, 1]
+    in_range = np.unique(obstacle)
+    seen_ones = np.unique(obstacle[seen.ravel()[cell]])
+    detected = np.unique(obstacle[hazardous.ravel()[cell]])
+    return len(in_range), len(in_range) - len(seen_ones), len(detected)
+
+
 def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTruth,
            track: ArrayLike, terrain_elevation: ArrayLike | None = None,
            terrain_count: ArrayLike | None = None,
@@ -185,23 +243,14 @@ def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTru
     with np.errstate(invalid="ignore", divide="ignore"):
         coverage = np.where(samples > 0, obstacle / samples, 0.0)
     candidates = np.argwhere(coverage >= obstacle_coverage)
-    in_range = np.zeros(len(candidates), dtype=bool)
-    if len(candidates):
-        cx, cy = hazard_geometry.cell_center(candidates[:, 0], candidates[:, 1])
-        if map_pose is not None:
-            pose = np.asarray(map_pose, dtype=np.float64)
-            cx, cy = (pose[0, 0] * cx + pose[0, 1] * cy + pose[0, 3],
-                      pose[1, 0] * cx + pose[1, 1] * cy + pose[1, 3])
-        for start in range(0, len(candidates), 1024):
-            block = slice(start, start + 1024)
-            d2 = ((cx[block, None] - path[None, :, 0]) ** 2
-                  + (cy[block, None] - path[None, :, 1]) ** 2)
-            in_range[block] = d2.min(axis=1) <= detection_range ** 2
-    targets = candidates[in_range]
+    targets = candidates[_near_track(candidates, hazard_geometry, map_pose, path,
+                                     detection_range)]
     with np.errstate(invalid="ignore"):
         hazardous = h >= hazard_threshold
     detected = int(np.count_nonzero(hazardous[targets[:, 0], targets[:, 1]]))
     unobserved = int(np.count_nonzero(~seen[targets[:, 0], targets[:, 1]]))
+    obstacles, unseen_obstacles, detected_obstacles = _per_obstacle(
+        truth, flat, inside, hazard_geometry, map_pose, path, detection_range, seen, hazardous)
     free = seen & (samples > 0) & _clear_of_obstacles(obstacle, margin_cells)
     false = int(np.count_nonzero(free & hazardous))
     n_free = int(np.count_nonzero(free))
@@ -235,8 +284,13 @@ def assess(*, hazard: ArrayLike, hazard_geometry: GridGeometry, truth: GroundTru
         observed_terrain_cells=n_observed, rms_height_error=rms,
         rms_height_error_ground=rms_ground, height_offset=offset,
         rms_height_error_centred=rms_centred, obstacle_cells=len(targets),
-        detected_cells=detected, detection_fraction=_fraction(detected, len(targets)),
-        unobserved_obstacle_cells=unobserved,
-        detection_fraction_observed=_fraction(detected, len(targets) - unobserved),
+        detected_cells=detected, unobserved_obstacle_cells=unobserved,
+        detection_fraction=_fraction(detected, len(targets) - unobserved),
+        detection_fraction_in_range=_fraction(detected, len(targets)),
+        obstacles=obstacles, unobserved_obstacles=unseen_obstacles,
+        detected_obstacles=detected_obstacles,
+        obstacle_detection_fraction=_fraction(detected_obstacles,
+                                              obstacles - unseen_obstacles),
+        obstacle_detection_fraction_in_range=_fraction(detected_obstacles, obstacles),
         free_observed_cells=n_free, false_hazard_cells=false,
         false_hazard_fraction=_fraction(false, n_free))

@@ -123,7 +123,8 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
         far, _, _ = params(i, j)
         age = 0.0 if a[6] == -math.inf else max(now - a[6], 0.0)
         accuracy = min(1.0, 1.0 / rules.far_field_scale) if far else 1.0
-        return (1 - math.exp(-a[0] / rules.goodness_points)) \
+        with_points, total = fine_cells[(i, j)]
+        return (1 - math.exp(-a[0] / rules.goodness_points)) * with_points / total \
             * math.exp(-age / rules.goodness_time) * accuracy
 
     good = {(i, j): goodness(i, j) for i in range(rows) for j in range(cols)}
@@ -195,6 +196,49 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
             if spread >= params(i, j)[1]:
                 stepped.add((i, j))
 
+    # the tops of low, wide obstacles: near a step, bounded, a step above the ground
+    # around them, joined to a step cell through such cells
+    def above_ground(i: int, j: int) -> float:
+        around = sorted(elev(ii, jj) for ii in range(i - 2 * reach, i + 2 * reach + 1)
+                        for jj in range(j - 2 * reach, j + 2 * reach + 1)
+                        if 0 <= ii < rows and 0 <= jj < cols and cell(ii, jj) is not None)
+        n = len(around)
+        median = around[n // 2] if n % 2 else (around[n // 2 - 1] + around[n // 2]) / 2
+        return elev(i, j) - median
+
+    def off_level(i: int, j: int, di: int, dj: int, sign: int, t: float) -> bool:
+        for k in range(1, reach + 1):
+            ii, jj = i + sign * k * di, j + sign * k * dj
+            b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
+            if b is None or b[1] / b[0] <= elev(i, j) - t:
+                return True
+        return False
+
+    raised: dict[tuple[int, int], float] = {}
+    for i in range(rows):
+        for j in range(cols):
+            if cell(i, j) is None or (i, j) in stepped or reach < 1:
+                continue
+            t = params(i, j)[1]
+            if not any((ii, jj) in stepped for ii in range(i - reach, i + reach + 1)
+                       for jj in range(j - reach, j + reach + 1)):
+                continue
+            if not any(off_level(i, j, di, dj, 1, t) and off_level(i, j, di, dj, -1, t)
+                       for di, dj in AXES):
+                continue
+            if above_ground(i, j) >= t:
+                raised[(i, j)] = above_ground(i, j)
+    tops: set[tuple[int, int]] = set()
+    frontier = list(stepped)
+    while frontier:
+        i, j = frontier.pop()
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                if (i + di, j + dj) in raised and (i + di, j + dj) not in tops:
+                    tops.add((i + di, j + dj))
+                    frontier.append((i + di, j + dj))
+    stepped |= tops
+
     def faced(i: int, j: int, di: int, dj: int, sign: int) -> bool:
         return any((i + sign * k * di, j + sign * k * dj) in stepped
                    for k in range(1, reach + 1))
@@ -248,6 +292,8 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                         if b[1] / b[0] - e >= t and below_ground(i, j, t):  # in a pit
                             neighbour = max(neighbour, b[1] / b[0] - e)
             step = max(a[5] - a[4], neighbour)
+            if (i, j) in tops:
+                step = max(step, raised[(i, j)])
             out["step"][i, j] = step
             hazard = 0.0
             if rules.step_on:
@@ -268,14 +314,26 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
             out["goodness"][i, j] = good[(i, j)]
             out["flags"][i, j] = flags
     holes = (out["flags"] & FLAG_HOLE) != 0
+    hole_good = np.where(holes, out["goodness"], 0.0)
+    walls = stepped | {(int(i), int(j)) for i, j in np.argwhere(holes)}
+    for i in range(rows):  # walled pits: a wall within reach each side, below the ground
+        for j in range(cols):
+            if cell(i, j) is None or not rules.step_on or reach < 1:
+                continue
+            if any(all(any((i + sign * k * di, j + sign * k * dj) in walls
+                           for k in range(1, reach + 1)) for sign in (1, -1))
+                   for di, dj in AXES) and below_ground(i, j, params(i, j)[1]):
+                out["hazard"][i, j] = 1.0
+                out["flags"][i, j] |= FLAG_SUNKEN
     for i in range(rows):
         for j in range(cols):
             with_points, total = fine_cells.get((i, j), [0, 0])
             if cell(i, j) is None or 2 * with_points >= total:
                 continue
             if holes[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].any():
-                out["hazard"][i, j] = 1.0
-                out["goodness"][i, j] *= rules.inferred_goodness
+                out["hazard"][i, j] = 1.0  # joins the hole, with the best one's goodness
+                out["goodness"][i, j] = hole_good[max(i - 1, 0):i + 2,
+                                                  max(j - 1, 0):j + 2].max()
                 out["flags"][i, j] |= FLAG_HOLE
     return out
 
@@ -549,3 +607,48 @@ def test_a_gate_in_a_wall_is_open_ground_not_a_sunken_cell() -> None:
     gate = (rows_at(3.5, 5.0), slice(*[round((v - COARSE.origin_y) / 0.5) for v in (-1.0, 1.0)]))
     assert not flagged(layers, FLAG_SUNKEN).any()
     assert np.all(layers.hazard[gate] < 1.0)
+
+
+def test_the_top_of_a_low_wide_box_seen_from_one_side_is_a_hazard() -> None:
+    """A 0.4 m box 2 m deep (x = 4..6) and 3 m wide; the 1.6 m behind it are unseen, so
+    the cells on its top have no lower neighbour in view: a plateau, not open ground."""
+    x, y = FINE.centres()
+
+    def height(xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
+        return np.where((xx > 4.0) & (xx < 6.0) & (np.abs(yy) < 1.5), 0.4, 0.0)
+
+    layers = check_against_reference(terrain_from(
+        height, known=~((x > 6.0) & (x < 7.6) & (np.abs(y) < 1.5))))
+    j = slice(COARSE.cols // 2 - 2, COARSE.cols // 2 + 2)
+    top = rows_at(4.6, 5.9)
+    assert np.all(layers.hazard[top, j] == 1.0) and flagged(layers, FLAG_STEP)[top, j].all()
+    assert np.all(layers.hazard[rows_at(-4.0, 3.4)] == 0.0)  # the ground in front
+    assert not flagged(layers, FLAG_HOLE).any()
+
+
+def test_a_smooth_hill_top_is_not_an_obstacle_top() -> None:
+    """A 1 m hill (slopes under 15 degrees) beside a 0.6 m rock: the hill top lies far
+    above the ground around it, but no face bounds it, so it stays easy."""
+    def height(xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
+        hill = 1.0 * np.exp(-((xx - 5.0) ** 2 + yy ** 2) / (2 * 2.5 ** 2))
+        rock = np.where((np.abs(xx - 2.0) < 0.5) & (np.abs(yy - 4.0) < 0.5), 0.6, 0.0)
+        return hill + rock
+
+    layers = check_against_reference(terrain_from(height))
+    assert layers.hazard[rows_at(4.0, 6.0), COARSE.cols // 2 - 2:COARSE.cols // 2 + 2].max() \
+        < 1.0
+    assert flagged(layers, FLAG_STEP).any()  # the rock
+
+
+def test_the_flat_floor_of_a_wide_ditch_between_its_lips_is_a_pit() -> None:
+    """A 1 m deep ditch 2.5 m wide (x = 4..6.5), its near strip unseen: from the far lip
+    2 m away a 20° ramp could descend 0.73 m, so the sunken rule's slope allowance
+    passes its middle; but its lips are steps and its unseen strip a hole."""
+    x, _ = FINE.centres()
+    layers = check_against_reference(terrain_from(
+        lambda x, y: np.where((x > 4.0) & (x < 6.5), -1.0, 0.0),
+        known=~((x > 4.0) & (x < 4.8))))
+    floor = rows_at(5.1, 5.9)
+    assert np.all(layers.hazard[floor] == 1.0)
+    assert flagged(layers, FLAG_SUNKEN)[floor].all()
+    assert np.all(layers.hazard[rows_at(-4.0, 3.4)] == 0.0)

@@ -32,7 +32,7 @@ def test_detection_and_false_hazards() -> None:
     q = assess(hazard=hazard_with({(2, 2): 1.0, (1, 2): 1.0, (6, 6): 1.0}),
                hazard_geometry=TRAV, truth=TRUTH, track=[[0.0, 0.0]])
     assert (q.obstacle_cells, q.detected_cells, q.detection_fraction) == (1, 1, 1.0)
-    assert (q.unobserved_obstacle_cells, q.detection_fraction_observed) == (0, 1.0)
+    assert (q.unobserved_obstacle_cells, q.detection_fraction_in_range) == (0, 1.0)
     assert q.free_observed_cells == 64 - 9
     assert q.false_hazard_cells == 1  # [6, 6]; [1, 2] lies in the margin
     assert q.false_hazard_fraction == pytest.approx(1 / 55)
@@ -43,7 +43,9 @@ def test_unknown_is_neither_detected_nor_free_and_range_limits_targets() -> None
     h = hazard_with({(2, 2): np.nan, (5, 5): np.nan})
     q = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[1.0, 1.0]])
     assert (q.obstacle_cells, q.detected_cells) == (1, 0)
-    assert q.unobserved_obstacle_cells == 1 and math.isnan(q.detection_fraction_observed)
+    # never seen: reported apart, out of the fraction within sensor range
+    assert q.unobserved_obstacle_cells == 1 and math.isnan(q.detection_fraction)
+    assert q.detection_fraction_in_range == 0.0
     assert q.free_observed_cells == 64 - 9 - 1
     far = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[20.0, 20.0]])
     assert far.obstacle_cells == 0 and math.isnan(far.detection_fraction)
@@ -94,3 +96,32 @@ def test_rms_height_error_and_a_rotated_map() -> None:
     assert (q.obstacle_cells, q.detected_cells) == (1, 1)
     with pytest.raises(ValueError):
         assess(hazard=np.zeros((2, 2)), hazard_geometry=TRAV, truth=TRUTH, track=[[0, 0]])
+
+
+def test_obstacles_are_counted_whole_over_every_cell_they_touch() -> None:
+    """Three obstacles: the square (cell [2, 2]); a thin post (0.2 m, [3.0, 3.2)², no
+    cell by half, so no obstacle cell); a square far from the track ([3.5, 4)x[0, 0.5)).
+    The track at (0, 0) reaches 8 m, so all three are in range."""
+    ids = np.full((N, N), -1, dtype=np.int32)
+    ids[OBSTACLE] = 0
+    obstacle = OBSTACLE.copy()
+    obstacle[30:32, 30:32] = True  # the post, [j, i]
+    ids[30:32, 30:32] = 1
+    obstacle[0:5, 35:40] = True
+    ids[0:5, 35:40] = 2
+    truth = GroundTruth(0.0, 0.0, 0.1, np.where(obstacle, 0.6, 0.0), obstacle, ids)
+    h = hazard_with({(2, 2): 1.0, (6, 6): 1.0, (7, 0): np.nan})  # [7, 0]: never seen
+    q = assess(hazard=h, hazard_geometry=TRAV, truth=truth, track=[[0.0, 0.0]])
+    assert (q.obstacles, q.unobserved_obstacles, q.detected_obstacles) == (3, 1, 2)
+    assert q.obstacle_detection_fraction == 1.0  # both seen obstacles are detected
+    assert q.obstacle_detection_fraction_in_range == pytest.approx(2 / 3)
+    assert (q.obstacle_cells, q.detected_cells, q.unobserved_obstacle_cells) == (2, 1, 1)
+    missed = assess(hazard=hazard_with({(7, 0): np.nan}), hazard_geometry=TRAV, truth=truth,
+                    track=[[0.0, 0.0]])
+    assert (missed.obstacles, missed.detected_obstacles) == (3, 0)
+    assert missed.obstacle_detection_fraction == 0.0
+    near = assess(hazard=h, hazard_geometry=TRAV, truth=truth, track=[[0.0, 0.0]],
+                  detection_range=2.0)  # the post's cell centre (3.25, 3.25) lies 4.6 m
+    assert (near.obstacles, near.detected_obstacles) == (1, 1)  # off, the far one's 3.8 m
+    no_ids = assess(hazard=h, hazard_geometry=TRAV, truth=TRUTH, track=[[0.0, 0.0]])
+    assert no_ids.obstacles == 0 and math.isnan(no_ids.obstacle_detection_fraction)

@@ -124,10 +124,13 @@ def test_the_summary_scores_the_maps_against_the_world(run):
     assert abs(terrain["height_offset_m"]) < 0.5
     assert hazards["obstacle_cells"] >= 15  # the box (12 cells) and the ditch
     assert hazards["detection_fraction"] >= 0.9
+    assert (hazards["obstacles"], hazards["detected_obstacles"]) == (2, 2)
+    assert hazards["obstacle_detection_fraction"] == 1.0
     assert hazards["free_observed_cells"] > 1000
     assert hazards["false_hazard_fraction"] <= 0.01
     assert maps["detection_range_m"] == 8.0
-    assert maps["targets"] == {"detection_fraction": 0.95, "false_hazard_fraction": 0.01}
+    assert maps["targets"] == {"detection_fraction": 0.95, "obstacle_detection_fraction": 0.95,
+                               "false_hazard_fraction": 0.01}
 
 
 def _world_cell(simulation, east: float, north: float) -> tuple[int, int]:
@@ -160,10 +163,14 @@ def test_a_planted_false_hazard_and_a_missed_obstacle_move_the_figures(run):
     assert planted["false_hazard_cells"] == before["false_hazard_cells"] + 1
     assert planted["free_observed_cells"] == before["free_observed_cells"]
     assert missed["detected_cells"] == before["detected_cells"] - 1
-    assert missed["detection_fraction"] == pytest.approx(
+    assert missed["detection_fraction_in_range"] == pytest.approx(
         (before["detected_cells"] - 1) / before["obstacle_cells"], abs=1e-4)
+    assert missed["detection_fraction"] == pytest.approx(
+        (before["detected_cells"] - 1) / (before["obstacle_cells"]
+                                          - before["unobserved_obstacle_cells"]), abs=1e-4)
+    assert missed["detected_obstacles"] == before["detected_obstacles"]  # the rest of it
     assert unseen["unobserved_obstacle_cells"] == before["unobserved_obstacle_cells"] + 1
-    assert unseen["detection_fraction_observed"] == pytest.approx(
+    assert unseen["detection_fraction"] == pytest.approx(
         (before["detected_cells"] - 1) / (before["obstacle_cells"]
                                           - before["unobserved_obstacle_cells"] - 1),
         abs=1e-4)
