@@ -42,6 +42,7 @@ from afa.diagnostics import Stopwatch
 from afa.errors import AfaError
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
 from components.find_path.dstar_lite import DStarLite, PlanStatus
+from components.find_path.kinematic import Refined, Refiner
 from components.find_path.parameters import FindPathParameters
 from components.pure_pursuit.pursuit import gaussian_votes, pursuit_curvature, to_vehicle_frame
 from components.waypoints import to_local
@@ -51,6 +52,8 @@ from idl import GlobalMap as GlobalMapInterface
 __all__ = ["FindPath", "BEHAVIOUR", "CostGrid"]
 
 BEHAVIOUR = "FindPath"
+#: How far along a drivable (refined) path the vote aims (m): two of its motions.
+REFINED_LOOKAHEAD = 1.5
 
 
 class CostGrid:
@@ -153,16 +156,22 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.global_map = self.uses(GlobalMapInterface, p.GlobalMapName)
         self.platform = self.uses(Platform, p.PlatformName)
         self.arcs = ArcSet.from_parameters()
+        self._refiner: Refiner | None = None
+        self._steering: float | None = None  # the curvature of the last drivable vote
         self.grid: CostGrid | None = None
         self.planner: DStarLite | None = None
         self.goal: tuple[int, int] | None = None
         self.path: list[tuple[int, int]] = []
+        self.refined: Refined | None = None
         self.plan_times: list[float] = []
         self.counters = {"cycles": 0, "plans": 0, "replans": 0, "tracking_replans": 0,
-                         "no_path": 0, "cells_updated": 0, "poll_errors": 0}
+                         "no_path": 0, "cells_updated": 0, "poll_errors": 0,
+                         "refined": 0, "undrivable": 0}
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
+        self._refiner = None
+        self._steering = None
         self.grid = self.planner = None
         self.goal = None
         self.path = []
@@ -201,12 +210,28 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             self._no_path(grid, waypoint)
             return
         self.path = self.planner.path()
-        point = self._lookahead(grid, (x, y))
+        points = self._track(grid, (x, y, yaw))
+        # A path for a point but no drivable way onto it from here: every arc is vetoed
+        # (the arbiter backs out to make room) and the votes still say where the D* path
+        # goes, so the back-out swings the nose towards it (decision 0018).
+        undrivable = points is None
+        if self.refined is not None:
+            # a drivable path starts at the vehicle: steer by its next metres (pursuit
+            # of a point on an arc through the vehicle gives that arc's curvature), a
+            # Gaussian as narrow as Pure Pursuit's
+            point = self.refined.at(REFINED_LOOKAHEAD)
+            spread = 0.1  # m of miss at the look-ahead point, one σ
+        else:
+            if points is None:
+                points = [grid.centre(c) for c in self.path]
+            point = self._lookahead(points, (x, y), grid.gridsize)
+            spread = 1.0  # as Pure Pursuit
         ahead, left = to_vehicle_frame(point[0], point[1], x, y, yaw)
         kappa = pursuit_curvature(ahead, left, self.arcs.max_curvature)
+        self._steering = kappa if self.refined is not None else None
         n = len(self.arcs)
-        sigma = 2.0 * 1.0 / max(math.hypot(ahead, left), 1.0) ** 2  # a 1 m miss, as pursuit
-        votes = ArcVotes(np.zeros(n, dtype=bool),
+        sigma = 2.0 * spread / max(math.hypot(ahead, left), 1.0) ** 2
+        votes = ArcVotes(np.full(n, undrivable, dtype=bool),
                          gaussian_votes(self.arcs.curvatures, kappa, sigma), np.ones(n),
                          np.full(n, 2.0))
         stamp = TimeIDL.from_seconds(self.clock.now())
@@ -267,14 +292,48 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.counters["replans"] += 1
         return self.planner.replan()
 
-    def _lookahead(self, grid: CostGrid, vehicle: tuple[float, float]) -> tuple[float, float]:
-        """The farthest path point between Min- and MaxLookahead cells along the path to
-        which the path runs within half a cell of the straight line."""
+    def _track(self, grid: CostGrid, pose: tuple[float, float, float]
+               ) -> list[tuple[float, float]] | None:
+        """The points to track: a drivable path to the D* path's point ``RefineDistance``
+        ahead (:mod:`components.find_path.kinematic`), in any heading; None when there is
+        none (the vehicle must back out first); the D* path's cell centres when
+        refinement is off."""
         p = self.parameters
-        points = [grid.centre(c) for c in self.path]
+        centres = [grid.centre(c) for c in self.path]
+        self.refined = None
+        if p.RefineDistance <= 0.0 or len(centres) < 2:
+            return centres
+        travelled, k = 0.0, 0
+        while k + 1 < len(centres) and travelled < p.RefineDistance:
+            travelled += math.dist(centres[k], centres[k + 1])
+            k += 1
+        target = (*centres[k], None)  # any heading: beyond a gate, the gate aligns it
+        if self._refiner is None:
+            self._refiner = Refiner(0.9 * self.arcs.max_curvature, tuple(p.DiscOffsets),
+                                    p.DiscRadius, hazard_margin=0.5 * grid.gridsize)
+        blocked = ~np.isfinite(grid.raw) | ~grid.inside
+        # The body discs keep the refined path clear; the cells D* leaves out for the
+        # rear axle (within InflationRadius) are open to it at twice the margin's cost,
+        # so it may pass closer than D* would, where the body fits (a slalom's gap).
+        cost = np.where(np.isfinite(grid.cost), grid.cost,
+                        np.where(blocked, np.inf, 2.0 * p.MarginCost))
+        refined = self._refiner.plan(blocked, cost, grid.origin, grid.gridsize, pose, target,
+                                     curvature=self._steering)
+        if refined is None:
+            self.counters["undrivable"] += 1
+            return None
+        self.counters["refined"] += 1
+        self.refined = refined
+        return [(q[0], q[1]) for q in refined.poses]
+
+    def _lookahead(self, points: list[tuple[float, float]], vehicle: tuple[float, float],
+                   gridsize: float) -> tuple[float, float]:
+        """The farthest of ``points`` between Min- and MaxLookahead cells along them to
+        which they run within half a cell of the straight line from the vehicle."""
+        p = self.parameters
         if len(points) < 2:
             return points[-1] if points else vehicle
-        g = grid.gridsize
+        g = gridsize
         travelled = 0.0
         chosen = points[-1]
         for k in range(1, len(points)):

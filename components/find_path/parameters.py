@@ -66,6 +66,23 @@ class FindPathParameters(Parameters):
                     "MarginCost, so paths keep a little distance where they can")
     MarginCost: Annotated[float, Field(ge=1)] = param(
         3.0, unit="1", description="afa addition: the least cost of a margin cell")
+    RefineDistance: Annotated[float, Field(ge=0)] = param(
+        10.0, unit="m",
+        description="afa addition: FindPath tracks a drivable path (forward arcs within "
+                    "the arc set's curvature, the body as discs) to the point of the D* "
+                    "path this far ahead, rather than the D* path itself, where one is "
+                    "found (docs/decisions/0024-kinematic-refinement.md); 0 tracks the "
+                    "D* path")
+    DiscOffsets: tuple[float, ...] = param(
+        (0.0, 0.8, 1.6, 2.4), unit="m",
+        description="afa addition: where along the body (m ahead of the rear axle) the "
+                    "refinement checks a disc of DiscRadius for obstacles; together they "
+                    "cover the body from bumper to bumper")
+    DiscRadius: Annotated[float, Field(gt=0)] = param(
+        0.81, unit="m",
+        description="afa addition: the radius of the refinement's body discs: with discs "
+                    "0.8 m apart over the Raptor's 1.4 m width, sqrt(0.7^2 + 0.4^2) covers "
+                    "the whole body")
 
     @model_validator(mode="after")
     def _lookahead_range(self) -> FindPathParameters:
