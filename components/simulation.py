@@ -30,6 +30,7 @@ import math
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal, Protocol, TypeVar
 
@@ -84,8 +85,10 @@ WAYPOINT_TOLERANCE = 3.0
 #: The mission area given to the Global Map: the terrain less this margin (m).
 GEOFENCE_MARGIN = 1.0
 #: Physics step (s): 50 Hz, finer than every sensor but the laser's scan lines, which
-#: are ray-cast at their own times from the latest state.
+#: are ray-cast from the pose interpolated at their first beam (frame_pose_at).
 PHYSICS_STEP = 0.02
+#: Physics steps kept for frame_pose_at: 0.1 s, more than a scan line's 27 ms.
+HISTORY_STEPS = 6
 #: How often the drive script repeats its joystick command (s): Vehicle Control's
 #: watchdog stops the vehicle when commands stop arriving, as a real joystick link would.
 JOYSTICK_PERIOD = 0.1
@@ -128,6 +131,12 @@ class SimulatedWorld(Protocol):
 
     def frame_pose(self, frame: str) -> np.ndarray:
         """^W T_frame now: the vehicle's pose times the frame's mounting."""
+        ...
+
+    def frame_pose_at(self, frame: str, t: float) -> np.ndarray:
+        """^W T_frame at clock time ``t`` (``clock.monotonic()`` scale) within the last
+        few physics steps: the vehicle's pose interpolated between the two steps around
+        ``t`` (the latest one for a later ``t``, the oldest kept for an earlier one)."""
         ...
 
     def rng(self) -> np.random.Generator:
@@ -324,6 +333,8 @@ class RaptorSimulation:
         self._mounts: dict[str, np.ndarray] = {}
         self._poses_of: VehicleState | None = None  # the state _poses were computed at
         self._poses: dict[str, np.ndarray] = {}
+        #: (clock.monotonic(), state) of the last physics steps, for frame_pose_at
+        self._history: deque[tuple[float, VehicleState]] = deque(maxlen=HISTORY_STEPS)
         self._system: System | None = None
         self._observer: Any = None
         self._phase: Phase = "new"
@@ -351,6 +362,25 @@ class RaptorSimulation:
             pose = self._poses[frame] = state.transform() @ self.mount(frame)
             pose.flags.writeable = False
         return pose
+
+    def frame_pose_at(self, frame: str, t: float) -> np.ndarray:
+        history = self._history
+        if not history or t >= history[-1][0]:
+            return self.frame_pose(frame)
+        if t <= history[0][0]:
+            return history[0][1].transform() @ self.mount(frame)
+        k = len(history) - 1
+        while history[k - 1][0] > t:
+            k -= 1
+        (t0, a), (t1, b) = history[k - 1], history[k]
+        w = (t - t0) / (t1 - t0)
+        between = replace(a, east=a.east + w * (b.east - a.east),
+                          north=a.north + w * (b.north - a.north),
+                          up=a.up + w * (b.up - a.up),
+                          yaw=a.yaw + w * math.remainder(b.yaw - a.yaw, math.tau),
+                          roll=a.roll + w * (b.roll - a.roll),
+                          pitch=a.pitch + w * (b.pitch - a.pitch))
+        return between.transform() @ self.mount(frame)
 
     def rng(self) -> np.random.Generator:
         return np.random.default_rng(self._seeds.spawn(1)[0])
@@ -433,6 +463,7 @@ class RaptorSimulation:
         if system is None:
             raise RuntimeError("attach the simulation to a System before running it")
         self._start = self.clock.monotonic()
+        self._history.append((self._start, self.state))
         self._hazards = HazardField(self.terrain, self.vehicle.parameters)
         tasks = [system.tasks.spawn(self._physics(), owner="simulation physics")]
         if not self.teleop:
@@ -498,6 +529,7 @@ class RaptorSimulation:
             speed = 0.0 if brake else translation
             before = self.vehicle.collision
             self.vehicle.step(PHYSICS_STEP, speed, math.degrees(steering), self.terrain)
+            self._history.append((self.clock.monotonic(), self.state))
             if self.state.distance >= self._track_next:
                 self.track.append((self.state.east, self.state.north))
                 self._track_next = self.state.distance + TRACK_STEP
