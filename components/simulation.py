@@ -30,7 +30,6 @@ import math
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal, Protocol, TypeVar
 
@@ -333,8 +332,10 @@ class RaptorSimulation:
         self._mounts: dict[str, np.ndarray] = {}
         self._poses_of: VehicleState | None = None  # the state _poses were computed at
         self._poses: dict[str, np.ndarray] = {}
-        #: (clock.monotonic(), state) of the last physics steps, for frame_pose_at
-        self._history: deque[tuple[float, VehicleState]] = deque(maxlen=HISTORY_STEPS)
+        #: (clock.monotonic(), state, its frame poses) of the last physics steps, for
+        #: frame_pose_at
+        self._history: deque[tuple[float, VehicleState, dict[str, np.ndarray]]] = \
+            deque(maxlen=HISTORY_STEPS)
         self._system: System | None = None
         self._observer: Any = None
         self._phase: Phase = "new"
@@ -368,19 +369,24 @@ class RaptorSimulation:
         if not history or t >= history[-1][0]:
             return self.frame_pose(frame)
         if t <= history[0][0]:
-            return history[0][1].transform() @ self.mount(frame)
+            return self._step_pose(history[0], frame)
         k = len(history) - 1
         while history[k - 1][0] > t:
             k -= 1
-        (t0, a), (t1, b) = history[k - 1], history[k]
-        w = (t - t0) / (t1 - t0)
-        between = replace(a, east=a.east + w * (b.east - a.east),
-                          north=a.north + w * (b.north - a.north),
-                          up=a.up + w * (b.up - a.up),
-                          yaw=a.yaw + w * math.remainder(b.yaw - a.yaw, math.tau),
-                          roll=a.roll + w * (b.roll - a.roll),
-                          pitch=a.pitch + w * (b.pitch - a.pitch))
-        return between.transform() @ self.mount(frame)
+        before, after = history[k - 1], history[k]
+        w = (t - before[0]) / (after[0] - before[0])
+        a, b = self._step_pose(before, frame), self._step_pose(after, frame)
+        # element-wise: within a 20 ms step the rotation turns by milliradians, and the
+        # blend's departure from a rotation (of their square) is far below a millimetre
+        return a + w * (b - a)
+
+    def _step_pose(self, step: tuple[float, VehicleState, dict[str, np.ndarray]],
+                   frame: str) -> np.ndarray:
+        poses = step[2]
+        pose = poses.get(frame)
+        if pose is None:
+            pose = poses[frame] = step[1].transform() @ self.mount(frame)
+        return pose
 
     def rng(self) -> np.random.Generator:
         return np.random.default_rng(self._seeds.spawn(1)[0])
@@ -463,7 +469,7 @@ class RaptorSimulation:
         if system is None:
             raise RuntimeError("attach the simulation to a System before running it")
         self._start = self.clock.monotonic()
-        self._history.append((self._start, self.state))
+        self._history.append((self._start, self.state, {}))
         self._hazards = HazardField(self.terrain, self.vehicle.parameters)
         tasks = [system.tasks.spawn(self._physics(), owner="simulation physics")]
         if not self.teleop:
@@ -529,7 +535,7 @@ class RaptorSimulation:
             speed = 0.0 if brake else translation
             before = self.vehicle.collision
             self.vehicle.step(PHYSICS_STEP, speed, math.degrees(steering), self.terrain)
-            self._history.append((self.clock.monotonic(), self.state))
+            self._history.append((self.clock.monotonic(), self.state, {}))
             if self.state.distance >= self._track_next:
                 self.track.append((self.state.east, self.state.north))
                 self._track_next = self.state.distance + TRACK_STEP
