@@ -84,8 +84,10 @@ WAYPOINT_TOLERANCE = 3.0
 #: The mission area given to the Global Map: the terrain less this margin (m).
 GEOFENCE_MARGIN = 1.0
 #: Physics step (s): 50 Hz, finer than every sensor but the laser's scan lines, which
-#: are ray-cast at their own times from the latest state.
+#: are ray-cast from the pose interpolated at their first beam (frame_pose_at).
 PHYSICS_STEP = 0.02
+#: Physics steps kept for frame_pose_at: 0.1 s, more than a scan line's 27 ms.
+HISTORY_STEPS = 6
 #: How often the drive script repeats its joystick command (s): Vehicle Control's
 #: watchdog stops the vehicle when commands stop arriving, as a real joystick link would.
 JOYSTICK_PERIOD = 0.1
@@ -128,6 +130,12 @@ class SimulatedWorld(Protocol):
 
     def frame_pose(self, frame: str) -> np.ndarray:
         """^W T_frame now: the vehicle's pose times the frame's mounting."""
+        ...
+
+    def frame_pose_at(self, frame: str, t: float) -> np.ndarray:
+        """^W T_frame at clock time ``t`` (``clock.monotonic()`` scale) within the last
+        few physics steps: the vehicle's pose interpolated between the two steps around
+        ``t`` (the latest one for a later ``t``, the oldest kept for an earlier one)."""
         ...
 
     def rng(self) -> np.random.Generator:
@@ -324,6 +332,10 @@ class RaptorSimulation:
         self._mounts: dict[str, np.ndarray] = {}
         self._poses_of: VehicleState | None = None  # the state _poses were computed at
         self._poses: dict[str, np.ndarray] = {}
+        #: (clock.monotonic(), state, its frame poses) of the last physics steps, for
+        #: frame_pose_at
+        self._history: deque[tuple[float, VehicleState, dict[str, np.ndarray]]] = \
+            deque(maxlen=HISTORY_STEPS)
         self._system: System | None = None
         self._observer: Any = None
         self._phase: Phase = "new"
@@ -350,6 +362,30 @@ class RaptorSimulation:
         if pose is None:
             pose = self._poses[frame] = state.transform() @ self.mount(frame)
             pose.flags.writeable = False
+        return pose
+
+    def frame_pose_at(self, frame: str, t: float) -> np.ndarray:
+        history = self._history
+        if not history or t >= history[-1][0]:
+            return self.frame_pose(frame)
+        if t <= history[0][0]:
+            return self._step_pose(history[0], frame)
+        k = len(history) - 1
+        while history[k - 1][0] > t:
+            k -= 1
+        before, after = history[k - 1], history[k]
+        w = (t - before[0]) / (after[0] - before[0])
+        a, b = self._step_pose(before, frame), self._step_pose(after, frame)
+        # element-wise: within a 20 ms step the rotation turns by milliradians, and the
+        # blend's departure from a rotation (of their square) is far below a millimetre
+        return a + w * (b - a)
+
+    def _step_pose(self, step: tuple[float, VehicleState, dict[str, np.ndarray]],
+                   frame: str) -> np.ndarray:
+        poses = step[2]
+        pose = poses.get(frame)
+        if pose is None:
+            pose = poses[frame] = step[1].transform() @ self.mount(frame)
         return pose
 
     def rng(self) -> np.random.Generator:
@@ -433,6 +469,7 @@ class RaptorSimulation:
         if system is None:
             raise RuntimeError("attach the simulation to a System before running it")
         self._start = self.clock.monotonic()
+        self._history.append((self._start, self.state, {}))
         self._hazards = HazardField(self.terrain, self.vehicle.parameters)
         tasks = [system.tasks.spawn(self._physics(), owner="simulation physics")]
         if not self.teleop:
@@ -498,6 +535,7 @@ class RaptorSimulation:
             speed = 0.0 if brake else translation
             before = self.vehicle.collision
             self.vehicle.step(PHYSICS_STEP, speed, math.degrees(steering), self.terrain)
+            self._history.append((self.clock.monotonic(), self.state, {}))
             if self.state.distance >= self._track_next:
                 self.track.append((self.state.east, self.state.north))
                 self._track_next = self.state.distance + TRACK_STEP

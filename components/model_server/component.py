@@ -160,11 +160,16 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
         """The current pose, or None before the first GPS fix."""
         if self.initial_utm is None:
             return None
+        now = self.clock.now()
         try:
-            transform = self.filter.transform(self.initial_utm.tolist())
+            if isinstance(self.filter, RawPose):
+                # the fix is up to an epoch old: move it to the stamp (decision 0024)
+                transform = self.filter.transform(self.initial_utm.tolist(), at=now)
+            else:
+                transform = self.filter.transform(self.initial_utm.tolist())
         except PoseUnavailableError:
             return None
-        return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()),
+        return PoseTransformIDL(time=TimeIDL.from_seconds(now),
                                 HTransform=transform, initialUTM=self.initial_utm,
                                 poseValidFlag=bool(self.filter.pose_valid))
 

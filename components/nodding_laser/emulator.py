@@ -33,7 +33,9 @@ def _source(frame: str, sim: SimulatedWorld) -> Callable[..., np.ndarray]:
     beams: list[np.ndarray] = []  # the last bearings seen, their sines and -cosines
 
     def source(t: float, nod_deg: np.ndarray, bearings_deg: np.ndarray) -> np.ndarray:
-        pose = sim.frame_pose(frame)
+        # the line is cast from where the laser was at its first beam, the time the
+        # driver stamps it with (the fake asks at the line's end, a physics step later)
+        pose = sim.frame_pose_at(frame, t)
         if not beams or beams[0] is not bearings_deg:  # the fake reuses one array
             b = np.deg2rad(bearings_deg)
             beams[:] = [bearings_deg, np.sin(b), -np.cos(b)]

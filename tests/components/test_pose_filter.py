@@ -24,6 +24,7 @@ from components.model_server.pose_filter import (
     IX_SPEED,
     IX_YAW,
     IX_YAW_RATE,
+    RAW_EXTRAPOLATION_LIMIT,
     PoseFilter,
     PoseFilterTuning,
     PoseUnavailableError,
@@ -435,6 +436,34 @@ def test_raw_pose_gps_heading_only_when_moving() -> None:
     raw.update_gps(2.0, E0 + 11.0, N0 + 20.0, speed=0.1, track=math.radians(300.0))
     assert raw.heading == pytest.approx(0.0)  # held, stationary track ignored
     assert not raw.pose_valid
+
+
+def test_raw_pose_moves_the_fix_to_the_stamp_along_the_gps_velocity() -> None:
+    # a fix at t = 10 s, 2 m/s on a track of 30 degrees (clockwise from north)
+    raw = RawPose(heading_source="imu")
+    raw.update_gps(10.0, E0 + 5.0, N0 - 3.0, speed=2.0, track=math.radians(30.0),
+                   elevation=81.0)
+    raw.update_imu(10.1, yaw=math.radians(60.0))
+    utm = (E0, N0, 80.0)
+    np.testing.assert_allclose(raw.transform(utm)[:2, 3], [5.0, -3.0], atol=1e-9)
+    np.testing.assert_allclose(raw.transform(utm, at=10.0)[:2, 3], [5.0, -3.0], atol=1e-9)
+    # 0.2 s later: 0.4 m along the track, 0.2 m east and 0.3464 m north
+    np.testing.assert_allclose(raw.transform(utm, at=10.2)[:2, 3], [5.2, -3.0 + 0.34641],
+                               atol=1e-5)
+    # not backwards, and held after RAW_EXTRAPOLATION_LIMIT (fixes lost)
+    np.testing.assert_allclose(raw.transform(utm, at=9.0)[:2, 3], [5.0, -3.0], atol=1e-9)
+    far = [5.0 + 2.0 * 0.5 * RAW_EXTRAPOLATION_LIMIT,
+           -3.0 + 2.0 * math.cos(math.radians(30.0)) * RAW_EXTRAPOLATION_LIMIT]
+    np.testing.assert_allclose(raw.transform(utm, at=30.0)[:2, 3], far, atol=1e-9)
+    # the rotation and height do not depend on the stamp
+    np.testing.assert_allclose(raw.transform(utm, at=10.2)[:3, :3],
+                               raw.transform(utm)[:3, :3], atol=1e-12)
+    assert raw.transform(utm, at=10.2)[2, 3] == pytest.approx(1.0)
+    # a fix without velocity is held
+    raw.update_gps(11.0, E0, N0)
+    np.testing.assert_allclose(raw.transform(utm, at=11.3)[:2, 3], [0.0, 0.0], atol=1e-9)
+    with pytest.raises(ValueError):
+        raw.transform(utm, at=math.nan)
 
 
 def test_raw_pose_imu_heading() -> None:
