@@ -1,5 +1,5 @@
 """Measure where the maps put the world: the registration figures of docs/maps.md and
-decision 0024.
+decision 0025.
 
 Two measurements, each in virtual time (seed 0, deterministic):
 

@@ -163,7 +163,7 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
         now = self.clock.now()
         try:
             if isinstance(self.filter, RawPose):
-                # the fix is up to an epoch old: move it to the stamp (decision 0024)
+                # the fix is up to an epoch old: move it to the stamp (decision 0025)
                 transform = self.filter.transform(self.initial_utm.tolist(), at=now)
             else:
                 transform = self.filter.transform(self.initial_utm.tolist())

@@ -1064,7 +1064,7 @@ class RawPose:
     speed and track of the same epoch) to time ``at``, by at most
     :data:`RAW_EXTRAPOLATION_LIMIT` seconds: without it a pose stamped 0.2 s after its
     fix placed the vehicle 0.3 m behind itself at 1.5 m/s, and every scan fused with
-    such a pose landed that far behind the truth (decision 0024).
+    such a pose landed that far behind the truth (decision 0025).
 
     Raises:
         ValueError: ``heading_source`` is not "gps" or "imu", or ``track_min_speed`` < 0.

@@ -5,7 +5,7 @@ With the GPS's own error taken out, whatever misplaces the map is the pipeline's
 time stamps of scans and poses, the laser's mounting, the frames. The drive is fast
 (2 m/s) so that a timing error shows as a shift along the track that flips with the
 direction of travel: a pose stamped 0.24 s after the fix it carried put the map 0.3 to
-0.5 m behind the truth (decision 0024).
+0.5 m behind the truth (decision 0025).
 """
 
 from __future__ import annotations
