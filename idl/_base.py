@@ -265,6 +265,10 @@ class Array:
 #: The fingerprint heads of recent frozen arrays, by identity (see :func:`_fingerprint_head`).
 _HEADS: dict[int, tuple[np.ndarray, dict[str, Any]]] = {}
 _HEADS_KEPT = 256
+#: Only small arrays are remembered: the ones carried again are votes and arc sets (a
+#: few hundred bytes); a map's or an image's arrays are new every time, and keeping
+#: them alive would only hold memory.
+_HEAD_BYTES = 16384
 
 
 def _fingerprint_head(value: np.ndarray) -> dict[str, Any]:
@@ -272,10 +276,10 @@ def _fingerprint_head(value: np.ndarray) -> dict[str, Any]:
 
     Event bodies often carry the same array objects again (a vote re-stamped, the arc
     set's curvatures in every vote and decision), so the heads of the last few hundred
-    arrays that own their memory and are read-only (as validation leaves them) are kept
-    by identity; the cache holds the array itself, so its ``id`` cannot be reused while
-    the entry lives. (Writing into such an array after making it read-only is already
-    a broken producer: every subscriber shares it.)
+    small arrays (``_HEAD_BYTES``) that own their memory and are read-only (as
+    validation leaves them) are kept by identity; the cache holds the array itself, so
+    its ``id`` cannot be reused while the entry lives. (Writing into such an array after
+    making it read-only is already a broken producer: every subscriber shares it.)
     """
     key = id(value)
     known = _HEADS.get(key)
@@ -284,7 +288,7 @@ def _fingerprint_head(value: np.ndarray) -> dict[str, Any]:
     contiguous = np.ascontiguousarray(value)
     head = {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape),
             "sha256": hashlib.sha256(contiguous.data).hexdigest()}
-    if value.base is None and not value.flags.writeable:
+    if value.base is None and not value.flags.writeable and value.nbytes <= _HEAD_BYTES:
         if len(_HEADS) >= _HEADS_KEPT:
             del _HEADS[next(iter(_HEADS))]
         _HEADS[key] = (value, head)

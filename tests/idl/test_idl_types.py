@@ -268,6 +268,11 @@ def test_fingerprint_of_a_shared_array_is_its_own_each_time():
         points = rng.normal(size=(2, 3)).astype(np.float32)
         assert json.loads(body(points).fingerprint())["points"]["sha256"] == expected(points)
     assert first.fingerprint() == body(shared.copy()).fingerprint()
+    # a large array is not kept alive by the cache
+    import idl._base as base
+    big = body(np.zeros((base._HEAD_BYTES // 12 + 1, 3), dtype=np.float32))
+    big.fingerprint()
+    assert all(kept is not big.points for kept, _ in base._HEADS.values())
     # a view of a writable array is hashed from its current bytes every time
     base = rng.normal(size=(2, 3)).astype(np.float32)
     view = base[:]
