@@ -62,6 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, model_validator
 
 from afa.config.parameters import Parameters, param
+from components.trusted import trusted
 from idl.common import TimeIDL
 from idl.planning import ArcVoteIDL
 
@@ -231,6 +232,8 @@ class ArcSet:
         n = self.parameters.Count
         if k.shape != (n,):
             raise ValueError(f"ArcSet: {k.shape} curvatures for Count {n}")
+        if not np.isfinite(k).all():  # (event bodies carry them unvalidated: to_idl)
+            raise ValueError("ArcSet curvatures must be finite")
         if k[n // 2] != 0.0 or not np.array_equal(k, -k[::-1]) or np.any(np.diff(k) >= 0):
             raise ValueError("ArcSet curvatures must be strictly decreasing, symmetric and "
                              "contain 0.0 in the middle")
@@ -342,6 +345,9 @@ class ArcVotes:
     #: (see :meth:`to_idl`)
     _published: tuple[str, ArcSet, ArcVoteIDL] | None = field(
         default=None, init=False, repr=False, compare=False)
+    #: True when the constructor checked the arrays (not :meth:`unchecked`): their event
+    #: body then needs no second validation (see :meth:`to_idl`)
+    _checked: bool = field(default=False, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         veto = np.array(self.veto, dtype=bool)
@@ -358,6 +364,7 @@ class ArcVotes:
         object.__setattr__(self, "veto", _read_only(veto))
         for name, value in arrays.items():
             object.__setattr__(self, name, _read_only(value))
+        object.__setattr__(self, "_checked", True)
 
     @classmethod
     def unchecked(cls, veto: NDArray[np.bool_], vote: NDArray[np.float64],
@@ -390,9 +397,13 @@ class ArcVotes:
         """The ``ArcVoteIDL`` event body over ``arcs``.
 
         Votes are immutable and a behaviour often publishes the same ones scan after
-        scan (Obstacle Detection's "clear"): the body is validated the first time, and
+        scan (Obstacle Detection's "clear"): the body is built the first time, and
         later bodies for the same behaviour and arc set are that one with the new time
         stamp (equal to a validated construction; tests/components/test_arcs.py).
+        Votes the constructor checked (lengths, ranges) over an arc set (finite, checked
+        by :class:`ArcSet`) are put into the body without validating them again
+        (:func:`~components.trusted.trusted`); votes built with :meth:`unchecked` are
+        validated, so the IDL's checks still catch a producer's out-of-range value.
 
         Raises :class:`ArcSetMismatchError` if the votes are not one per arc of ``arcs``.
         """
@@ -402,11 +413,17 @@ class ArcVotes:
         if (last is not None and last[0] == behaviour and last[1] is arcs
                 and isinstance(time, TimeIDL)):
             return last[2].model_copy(update={"time": time})
-        body = ArcVoteIDL(time=time, behaviour=behaviour, curvatures=arcs.curvatures,
-                          veto=self.veto, vote=self.vote, certainty=self.certainty,
-                          maxSpeed=self.max_speed)
+        build = (trusted if self._checked and type(time) is TimeIDL and type(behaviour) is str
+                 else _validated)
+        body = build(ArcVoteIDL, time=time, behaviour=behaviour, curvatures=arcs.curvatures,
+                     veto=self.veto, vote=self.vote, certainty=self.certainty,
+                     maxSpeed=self.max_speed)
         object.__setattr__(self, "_published", (behaviour, arcs, body))
         return body
+
+
+def _validated(cls: type[ArcVoteIDL], **values: Any) -> ArcVoteIDL:
+    return cls(**values)
 
 
 #: The configuration section every voting behaviour and the arbiter read the arc set from.

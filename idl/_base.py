@@ -248,18 +248,51 @@ class Array:
     def _serialize(self, value: np.ndarray, info: Any) -> Any:
         if info.mode != "json":
             return value
-        contiguous = np.ascontiguousarray(value)
-        head: dict[str, Any] = {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape)}
         context = info.context
         if context is _FINGERPRINT:
-            head["sha256"] = hashlib.sha256(contiguous.data).hexdigest()
-        elif isinstance(context, dict) and WIRE_BUFFERS in context:
+            return _fingerprint_head(value)
+        contiguous = np.ascontiguousarray(value)
+        head: dict[str, Any] = {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape)}
+        if isinstance(context, dict) and WIRE_BUFFERS in context:
             buffers: list[np.ndarray] = context[WIRE_BUFFERS]
             head["$array"] = len(buffers)
             buffers.append(contiguous)
         else:
             head["data"] = base64.b64encode(contiguous.tobytes()).decode("ascii")
         return head
+
+
+#: The fingerprint heads of recent frozen arrays, by identity (see :func:`_fingerprint_head`).
+_HEADS: dict[int, tuple[np.ndarray, dict[str, Any]]] = {}
+_HEADS_KEPT = 256
+#: Only small arrays are remembered: the ones carried again are votes and arc sets (a
+#: few hundred bytes); a map's or an image's arrays are new every time, and keeping
+#: them alive would only hold memory.
+_HEAD_BYTES = 16384
+
+
+def _fingerprint_head(value: np.ndarray) -> dict[str, Any]:
+    """An array's part of :meth:`IDLModel.fingerprint`: dtype, shape and SHA-256.
+
+    Event bodies often carry the same array objects again (a vote re-stamped, the arc
+    set's curvatures in every vote and decision), so the heads of the last few hundred
+    small arrays (``_HEAD_BYTES``) that own their memory and are read-only (as
+    validation leaves them) are kept by identity; the cache holds the array itself, so
+    its ``id`` cannot be reused while the entry lives. (Writing into such an array after
+    making it read-only is already a broken producer: every subscriber shares it.)
+    """
+    key = id(value)
+    known = _HEADS.get(key)
+    if known is not None and known[0] is value:
+        return known[1]
+    contiguous = np.ascontiguousarray(value)
+    head = {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape),
+            "sha256": hashlib.sha256(contiguous.data).hexdigest()}
+    if value.base is None and not value.flags.writeable and value.nbytes <= _HEAD_BYTES:
+        if len(_HEADS) >= _HEADS_KEPT:
+            del _HEADS[next(iter(_HEADS))]
+        _HEADS[key] = (value, head)
+    return head
 
 
 @dataclass(frozen=True)

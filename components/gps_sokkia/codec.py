@@ -27,6 +27,7 @@ units the sentence carries: knots, km/h). Byte layouts and sources:
 
 from __future__ import annotations
 
+import binascii
 import math
 import re
 import struct
@@ -69,6 +70,7 @@ __all__ = [
     "UtmCoordinate",
     "Vtg",
     "crc32_novatel",
+    "crc32_novatel_reference",
     "encode_ascii_log",
     "encode_bestpos_ascii",
     "encode_bestpos_binary",
@@ -149,8 +151,18 @@ _CRC_TABLE: Final = _make_crc_table()
 def crc32_novatel(data: bytes | bytearray | memoryview, crc: int = 0) -> int:
     """NovAtel's CRC-32: reflected polynomial 0xEDB88320, initial value 0, no final XOR.
 
-    ``crc`` continues a previous computation. Never raises for bytes-like input.
+    ``crc`` (a 32-bit value) continues a previous computation. Never raises for
+    bytes-like input. It is the standard CRC-32's register without its inversions, so
+    the C implementation in ``binascii`` computes it: inverting the register going in
+    and the result coming out cancels them (every GPS log is checked twice in
+    simulation, by the emulator and the driver; :func:`crc32_novatel_reference` is the
+    table loop of the manual, which the tests compare with this).
     """
+    return binascii.crc32(data, crc ^ 0xFFFFFFFF) ^ 0xFFFFFFFF
+
+
+def crc32_novatel_reference(data: bytes | bytearray | memoryview, crc: int = 0) -> int:
+    """:func:`crc32_novatel` as the manual's byte-at-a-time table loop."""
     table = _CRC_TABLE
     for byte in bytes(data):
         crc = table[(crc ^ byte) & 0xFF] ^ (crc >> 8)

@@ -646,16 +646,21 @@ def encode_euler_accel_rate_reply(
     gains = gains if gains is not None else GainScales()
     g = gains.g_per_count * STANDARD_GRAVITY
     w = gains.rad_per_second_per_count
-    words = [
-        _angle_counts("roll", roll),
-        _angle_counts("pitch", pitch),
-        _angle_counts("yaw", yaw),
-        *(_clamped_counts(f"accel[{i}]", a, g) for i, a in enumerate(accel)),
-        *(_clamped_counts(f"rate[{i}]", r, w) for i, r in enumerate(rate)),
-        timer_ticks,
-    ]
-    if len(words) != 10:
+    vectors = (*accel, *rate)
+    if len(accel) != 3 or len(rate) != 3:
         raise ValueError("accel and rate must each have three components")
+    # (100 replies a simulated second: the names are only formatted for an error)
+    if not all(map(math.isfinite, (roll, pitch, yaw, *vectors))):
+        _angle_counts("roll", roll), _angle_counts("pitch", pitch), _angle_counts("yaw", yaw)
+        for i in range(3):
+            _finite(f"accel[{i}]", accel[i]), _finite(f"rate[{i}]", rate[i])
+    lo, hi = _INT16_MIN, _INT16_MAX
+    words = [((round(roll / _RADIANS_PER_COUNT) + 32768) % 65536) - 32768,
+             ((round(pitch / _RADIANS_PER_COUNT) + 32768) % 65536) - 32768,
+             ((round(yaw / _RADIANS_PER_COUNT) + 32768) % 65536) - 32768]
+    words += [max(lo, min(hi, round(a / g))) for a in vectors[:3]]
+    words += [max(lo, min(hi, round(r / w))) for r in vectors[3:]]
+    words.append(timer_ticks)
     return _frame(CMD_GYRO_STAB_EULER_ACCEL_RATE, words)
 
 

@@ -160,6 +160,7 @@ class FakeImu(FakeDevice[ImuCommand]):
         self.firmware = firmware
         self.serial_number = serial_number
         self.bias_capture_seconds = bias_capture_seconds
+        self._gains: tuple[tuple[int, int], GainScales] | None = None
         self.eeprom: dict[int, int] = {
             ACCEL_GAIN_SCALE_ADDRESS: accel_gain,
             GYRO_GAIN_SCALE_ADDRESS: gyro_gain,
@@ -188,8 +189,12 @@ class FakeImu(FakeDevice[ImuCommand]):
     @property
     def gains(self) -> GainScales:
         """The gain scales the unit's EEPROM words give (what its replies are scaled by)."""
-        return GainScales(accel=_signed(self.eeprom[ACCEL_GAIN_SCALE_ADDRESS]),
-                          gyro=_signed(self.eeprom[GYRO_GAIN_SCALE_ADDRESS]))
+        words = (self.eeprom[ACCEL_GAIN_SCALE_ADDRESS], self.eeprom[GYRO_GAIN_SCALE_ADDRESS])
+        known = self._gains
+        if known is None or known[0] != words:  # (asked for on every reply, 100 a second)
+            known = self._gains = (words, GainScales(accel=_signed(words[0]),
+                                                     gyro=_signed(words[1])))
+        return known[1]
 
     def timer_ticks(self) -> int:
         """The free-running 16-bit TimerTicks counter now."""

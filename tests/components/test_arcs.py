@@ -75,6 +75,8 @@ def test_the_constructor_refuses_curvatures_that_break_the_invariants():
         ArcSet(p, np.array([0.3, 0.01, -0.3]))
     with pytest.raises(ValueError, match="Count"):
         ArcSet(p, np.array([0.3, 0.1, 0.0, -0.1, -0.3]))
+    with pytest.raises(ValueError, match="finite"):
+        ArcSet(p, np.array([np.inf, 0.0, -np.inf]))
 
 
 # --- density: threading the design gap ---------------------------------------------------
@@ -275,6 +277,33 @@ def test_votes_published_again_equal_a_validated_body(arcs):
     for _ in range(2):
         with pytest.raises(ValueError):
             bad.to_idl(time=TimeIDL(sec=0), behaviour="x", arcs=arcs)
+
+
+def test_a_checked_votes_first_body_equals_a_validated_one(arcs):
+    """The first body of checked votes is built without validating them again
+    (components/trusted.py): it equals the validated construction field by field, dtype
+    by dtype, in its JSON and its fingerprint; the arrays are the votes' read-only
+    ones, as validation leaves them."""
+    n = len(arcs)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        votes = ArcVotes(rng.random(n) < 0.3, rng.random(n), rng.random(n),
+                         2.0 * rng.random(n))
+        stamp = TimeIDL(sec=int(rng.integers(-5, 5)), usec=int(rng.integers(0, 999_999)))
+        body = votes.to_idl(time=stamp, behaviour="PurePursuit", arcs=arcs)
+        validated = ArcVoteIDL(time=stamp, behaviour="PurePursuit",
+                               curvatures=arcs.curvatures, veto=votes.veto, vote=votes.vote,
+                               certainty=votes.certainty, maxSpeed=votes.max_speed)
+        assert type(body) is ArcVoteIDL and body == validated
+        assert body.fingerprint() == validated.fingerprint()
+        assert body.to_json() == validated.to_json()
+        assert body.model_fields_set == validated.model_fields_set
+        for name in ("curvatures", "veto", "vote", "certainty", "maxSpeed"):
+            mine, theirs = getattr(body, name), getattr(validated, name)
+            assert mine.dtype == theirs.dtype and not mine.flags.writeable, name
+    # a body that is not a TimeIDL is validated (and refused), as before
+    with pytest.raises(ValueError):
+        ArcVotes.halt(n).to_idl(time="now", behaviour="x", arcs=arcs)  # type: ignore[arg-type]
 
 
 def test_a_halt_vetoes_every_arc(arcs):

@@ -51,6 +51,7 @@ from components.gps_sokkia.codec import (
     UnlogCommand,
     Vtg,
     crc32_novatel,
+    crc32_novatel_reference,
     encode_bestpos_ascii,
     encode_bestpos_binary,
     encode_bestutm_ascii,
@@ -173,6 +174,13 @@ def test_crc32_worked_values() -> None:
 def test_crc32_equals_zlib_oracle_and_continues(data: bytes, more: bytes) -> None:
     assert crc32_novatel(data) == crc_oracle(data)
     assert crc32_novatel(more, crc32_novatel(data)) == crc_oracle(data + more)
+
+
+@PROPERTY
+@given(st.binary(max_size=300), st.integers(0, 0xFFFFFFFF))
+def test_crc32_equals_the_manuals_table_loop(data: bytes, crc: int) -> None:
+    assert crc32_novatel(data, crc) == crc32_novatel_reference(data, crc)
+    assert crc32_novatel(bytearray(data)) == crc32_novatel_reference(memoryview(data))
 
 
 @pytest.mark.parametrize("sentence", PUBLISHED_NMEA)

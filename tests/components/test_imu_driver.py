@@ -85,6 +85,28 @@ async def test_fake_replies_match_hand_computed_frames():
     assert received == euler + accel_gain + gyro_gain + ids
 
 
+def test_fake_replies_follow_gain_words_written_to_its_eeprom():
+    """The fake keeps the gains of its EEPROM words until a word changes: a reply
+    after a write is scaled by the new gain (0.5 g at gain 8192 is 0.5 * 32768000 / 8192
+    = 2000 counts; at 16384, 1000), and a gain word that is not a valid gain fails."""
+    clock = VirtualClock(start=0.0)
+    fake = FakeImu(clock, lambda t: ImuTruth(0.0, 0.0, 0.0, (0.5 * G, 0.0, 0.0),
+                                             (0.0, 0.0, 0.0)),
+                   accel_gain=8192, gyro_gain=16384)
+
+    def accel_x_counts() -> int:
+        return int.from_bytes(fake.reply(0x31)[7:9], "big", signed=True)
+
+    assert accel_x_counts() == accel_x_counts() == 2000
+    fake.eeprom[230] = 16384
+    assert accel_x_counts() == 1000
+    fake.eeprom[230] = 0x8000  # -32768 as a signed word: not a gain
+    with pytest.raises(ValueError):
+        fake.reply(0x31)
+    fake.eeprom[230] = 8192
+    assert accel_x_counts() == 2000
+
+
 async def test_fake_streams_in_continuous_mode_until_stopped():
     clock = VirtualClock(start=0.0)
     fake = make_fake(clock, period=0.01)

@@ -46,6 +46,7 @@ from components.mpc555.codec import (
     StopVehicle,
     WheelDistanceReport,
     crc16_ccitt_false,
+    crc16_ccitt_false_reference,
     encode_command,
     encode_frame,
     encode_report,
@@ -119,6 +120,13 @@ def test_crc_is_incremental_and_has_zero_residue() -> None:
 @given(st.binary(max_size=64))
 def test_crc_matches_the_standard_library(data: bytes) -> None:
     assert crc16_ccitt_false(data) == binascii.crc_hqx(data, 0xFFFF)
+
+
+@settings(max_examples=200)
+@given(st.binary(max_size=64), st.integers(0, 0xFFFF))
+def test_crc_equals_the_table_loop(data: bytes, crc: int) -> None:
+    assert crc16_ccitt_false(data, crc) == crc16_ccitt_false_reference(data, crc)
+    assert crc16_ccitt_false(bytearray(data)) == crc16_ccitt_false_reference(memoryview(data))
 
 
 # ------------------------------------------------------------------------------ literals

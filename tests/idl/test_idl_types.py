@@ -243,6 +243,47 @@ def test_fingerprint_digests_array_bytes_and_tells_values_apart():
     assert json.loads(seq.to_json())["points"]["data"]  # to_json is unchanged
 
 
+def test_fingerprint_of_a_shared_array_is_its_own_each_time():
+    """Array heads are remembered by identity for frozen arrays that own their memory:
+    a body carrying the same array again gives the same fingerprint as one carrying an
+    equal copy, a different array (even reusing a freed array's id) its own, and
+    writable arrays or views are hashed anew every time."""
+    rng = np.random.default_rng(5)
+
+    def body(points: np.ndarray) -> Range3dArrayEventIDL:
+        return Range3dArrayEventIDL(time=T0, sensorId=1, frame="f", points=points)
+
+    def expected(points: np.ndarray) -> str:
+        return hashlib.sha256(points.astype("<f4").tobytes()).hexdigest()
+
+    first = body(rng.normal(size=(4, 3)).astype(np.float32))
+    shared = first.points  # validated: a read-only copy that owns its memory
+    assert shared.base is None and not shared.flags.writeable
+    for _ in range(3):
+        again = Range3dArrayEventIDL.model_construct(time=T0, sensorId=1, frame="f",
+                                                     points=shared)
+        assert again.fingerprint() == body(shared.copy()).fingerprint()
+        assert json.loads(again.fingerprint())["points"]["sha256"] == expected(shared)
+    for _ in range(300):  # more arrays than are kept, ids reused as they are freed
+        points = rng.normal(size=(2, 3)).astype(np.float32)
+        assert json.loads(body(points).fingerprint())["points"]["sha256"] == expected(points)
+    assert first.fingerprint() == body(shared.copy()).fingerprint()
+    # a large array is not kept alive by the cache
+    import idl._base as base
+    big = body(np.zeros((base._HEAD_BYTES // 12 + 1, 3), dtype=np.float32))
+    big.fingerprint()
+    assert all(kept is not big.points for kept, _ in base._HEADS.values())
+    # a view of a writable array is hashed from its current bytes every time
+    base = rng.normal(size=(2, 3)).astype(np.float32)
+    view = base[:]
+    view.flags.writeable = False
+    seen = Range3dArrayEventIDL.model_construct(time=T0, sensorId=1, frame="f", points=view)
+    before = json.loads(seen.fingerprint())["points"]["sha256"]
+    base[0, 0] += 1.0
+    after = json.loads(seen.fingerprint())["points"]["sha256"]
+    assert before != after == expected(base)
+
+
 def test_time_json_is_the_miro_struct():
     assert TimeIDL(sec=12, usec=250_000).to_json() == b'{"sec":12,"usec":250000}'
 
