@@ -75,6 +75,8 @@ class SteppedClock(VirtualClock):
     the next instant. ``pace`` (a real-time factor) is honoured by the time master.
     """
 
+    _fire_due_paused = False  # a timer fires only within a grant
+
     def __init__(self, start: float = DEFAULT_EPOCH, *, pace: float | None = None) -> None:
         super().__init__(start, auto_advance=False, pace=pace)
 
