@@ -277,10 +277,6 @@ class VirtualClock(Clock):
       time, so waiting on the outside world is not mistaken for idleness.
     """
 
-    #: Whether timers due at the current instant still fire while paused (the lock-step
-    #: clock fires nothing without a grant).
-    _fire_due_paused = True
-
     def __init__(self, start: float = DEFAULT_EPOCH, *, auto_advance: bool = True,
                  pace: float | None = None,
                  real_time: Callable[[], float] = time.monotonic) -> None:
@@ -513,7 +509,7 @@ class VirtualClock(Clock):
         deadline = self._next_deadline()
         if deadline is None or self.auto_advance:
             return deadline
-        return deadline if self._fire_due_paused and deadline <= self._t else None
+        return deadline if deadline <= self._t else None
 
     def _has_work(self) -> bool:
         return bool(self._settlers) or self._due() is not None
