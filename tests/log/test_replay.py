@@ -108,6 +108,30 @@ async def test_a_long_autonomous_recording_re_runs_identically(tmp_path, record)
     assert shared >= 10
 
 
+def test_recorded_polls_stand_among_the_events_they_came_between(recorded_autonomous):
+    """A recorded call carries the last event sequence number at its start; the player
+    orders each instant by it (a re-issued ``setPlanningBoundary`` after the Traverse
+    map it followed, not before every event of its instant)."""
+    player = Player(recorded_autonomous, speed=None, check=True)
+    try:
+        placed = 0
+        for _, group in player._instants(player.first):
+            last_event = last_poll = -1
+            for message, header in group:
+                if header is not None:  # events in sequence, each after the calls
+                    assert header[3] > max(last_event, last_poll)  # made before it
+                    last_event = header[3]
+                    continue
+                record = player.reader.decode_wire(message)
+                assert record.seq >= max(last_event, last_poll, 0)
+                last_poll = record.seq
+                if last_event >= 0:  # an event of this instant came before it
+                    placed += 1
+        assert placed > 10
+    finally:
+        player.reader.close()
+
+
 def _shared_instants(reader) -> int:
     """Stamps at which a GPS fix and a Pure Pursuit vote were both recorded."""
     from afa.events import peek_envelope
