@@ -14,8 +14,11 @@ Implementations:
 - :class:`WallClock`: real time, for the vehicle and real-time simulation.
 - :class:`VirtualClock`: simulated time for tests, ``--fast`` simulation and replay.
   Time stands still while anything can run; when every task is waiting, time jumps to
-  the earliest pending timer. Timers fire in (deadline, creation order), so two runs with
-  the same inputs produce the same events, and an hour takes seconds. Optional *pacing*
+  the earliest pending timer. Timers fire in (deadline, creation order), **one at a
+  time**: after each the loop runs until nothing is ready before the next fires, even
+  at the same instant, so what happens within one instant is ordered by its timers and
+  not by how many awaits each chain of tasks takes (decision 0027). Two runs with the
+  same inputs produce the same events, and an hour takes seconds. Optional *pacing*
   caps it at a multiple of real time (``pace``; ``--realtime-factor``); it can be paused,
   resumed, stepped and run for a given time (notebooks, a console, a replay). While real
   I/O is pending (a socket, a serial port) waiting is not idleness: virtual time then runs
@@ -249,8 +252,14 @@ class VirtualClock(Clock):
     """Simulated time that advances only when every task is waiting.
 
     While timers are pending a driver task (one per event loop) yields until nothing
-    else is ready, then moves time to the earliest deadline and runs every callback due
-    at that instant, in the order they were scheduled. It needs the standard asyncio
+    else is ready, then moves time to the earliest deadline and runs the first callback
+    due then; the next one (due at the same instant or later) runs only once the loop is
+    idle again. So timers due at one instant fire in the order they were scheduled, each
+    with everything it wakes run to completion before the next (a source's input and
+    what is computed from it come before a periodic task's tick scheduled after it,
+    whatever the number of awaits in between). :meth:`call_when_idle` runs a callback at
+    the next such idle point, before the next timer (a log player places recorded
+    inputs between re-run timers of one instant with it). It needs the standard asyncio
     event loop (it looks at the loop's ready queue to detect idleness).
 
     - ``start``: the stamp (:meth:`now`) at creation; :meth:`monotonic` starts at 0.
@@ -282,6 +291,7 @@ class VirtualClock(Clock):
         self._timers: list[tuple[float, int, TimerHandle]] = []
         self._order = itertools.count()
         self._settlers: list[asyncio.Future[None]] = []
+        self._idle: list[Callable[[], object]] = []  # call_when_idle callbacks
         self._driver: _LoopDriver | None = None  # of the loop last used
         self._pace = pace
         self._io_pending = 0
@@ -375,6 +385,23 @@ class VirtualClock(Clock):
                 self._poke()
         return handle
 
+    def call_when_idle(self, callback: Callable[[], object]) -> None:
+        """Run ``callback()`` once, the next time the loop is idle (nothing ready to run)
+        before time moves or the next timer fires, even one due at this instant; before
+        :meth:`settle` callers are woken. Work it makes ready runs before that timer.
+
+        It does not keep time moving by itself: it runs at the next idle point the clock
+        reaches because a timer is pending, :meth:`settle` is awaited or time advances.
+        A callback may register itself again to run at the following idle point (after
+        the next timer has fired and what it woke has run)."""
+        self._idle.append(callback)
+        if self._driver is not None:
+            self._poke()
+
+    def next_deadline(self) -> float | None:
+        """The monotonic time of the earliest pending timer, or None."""
+        return self._next_deadline()
+
     @contextmanager
     def real_io(self) -> Iterator[None]:
         self._io_pending += 1
@@ -403,7 +430,7 @@ class VirtualClock(Clock):
         else:
             await self.settle()
             while (deadline := self._next_deadline()) is not None and deadline <= target:
-                self._fire_next()
+                self._fire_next()  # one timer, then settle: the driver's order
                 await self.settle()
             self._t = max(self._t, target)
         await self.settle()
@@ -425,15 +452,22 @@ class VirtualClock(Clock):
         return self._timers[0][0] if self._timers else None
 
     def _fire_next(self) -> None:
+        """Move to the earliest pending timer and run it (only it: the caller lets the
+        loop go idle before the next, even one due at the same instant)."""
         deadline = self._next_deadline()
         if deadline is None:
             return
         self._t = max(self._t, deadline)
-        while self._timers and self._timers[0][0] == deadline:
-            _, _, handle = heapq.heappop(self._timers)
-            if not handle.cancelled:
-                handle.cancelled = True  # a handle runs at most once
-                handle.callback()
+        _, _, handle = heapq.heappop(self._timers)  # not cancelled: _next_deadline saw to it
+        handle.cancelled = True  # a handle runs at most once
+        handle.callback()
+
+    def _run_idle(self) -> None:
+        """Run the :meth:`call_when_idle` callbacks registered so far (those they
+        register run at the next idle point)."""
+        callbacks, self._idle = self._idle, []
+        for callback in callbacks:
+            callback()
 
     def _effective_pace(self) -> float | None:
         if self._io_pending:
@@ -468,8 +502,17 @@ class VirtualClock(Clock):
         if self._driver is not None:
             self._driver.poke()
 
+    def _due(self) -> float | None:
+        """The deadline of the next timer the driver may fire: any, while time advances
+        by itself; paused, only one due at the current instant (a pause stops time, not
+        the rest of an instant whose first timers have fired)."""
+        deadline = self._next_deadline()
+        if deadline is None or self.auto_advance:
+            return deadline
+        return deadline if deadline <= self._t else None
+
     def _has_work(self) -> bool:
-        return bool(self._settlers) or (self.auto_advance and self._next_deadline() is not None)
+        return bool(self._settlers) or self._due() is not None
 
     def _wake_settlers(self) -> bool:
         settlers, self._settlers = self._settlers, []
@@ -549,14 +592,29 @@ class _LoopDriver:
             await asyncio.sleep(0)
             if ready:
                 continue
+            for clock in self.clocks:
+                if clock._idle:
+                    clock._run_idle()
+            if ready:
+                continue
+            # the rest of the current instant, one timer at a time, before settle() returns
+            for clock in self.clocks:
+                deadline = clock._due()
+                if deadline is not None and deadline <= clock._t:
+                    clock._fire_next()
+                    break
+            else:
+                deadline = None
+            if deadline is not None:
+                continue
             if any([c._wake_settlers() for c in self.clocks]):
                 continue
             wait: float | None = None
             for index, clock in enumerate(self.clocks):
-                deadline = clock._next_deadline() if clock.auto_advance else None
+                deadline = clock._due()
                 if deadline is None:
                     continue
-                real = clock._real_wait(deadline)
+                real = 0.0 if deadline <= clock._t else clock._real_wait(deadline)
                 if real <= 0.0:
                     clock._fire_next()
                     self.clocks.append(self.clocks.pop(index))

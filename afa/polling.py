@@ -244,6 +244,9 @@ class PollRecord:
     error: BaseException | None = None
     duration: float = 0.0
     caller: str = ""  #: the calling component ("" outside components)
+    #: the sequence number of the last event published when the call was made (-1: the
+    #: layer has no event channel): where the call stands among events of one instant
+    seq: int = -1
 
 
 class PollLayer:
@@ -251,10 +254,13 @@ class PollLayer:
     ``call_timeout`` unless given), per-method statistics, and recording hooks (a hook
     that raises is logged and never fails the call)."""
 
-    def __init__(self, clock: Clock) -> None:
+    def __init__(self, clock: Clock, sequence: Callable[[], int] | None = None) -> None:
         self.clock = clock
         self.statistics: dict[tuple[str, str], MethodStatistics] = {}
         self._hooks: list[Callable[[PollRecord], None]] = []
+        #: the event channel's last sequence number (a System passes its channel's), so
+        #: that a recording can place a call among the events of its instant
+        self.sequence = sequence
 
     def add_hook(self, hook: Callable[[PollRecord], None]) -> Callable[[], None]:
         """Call ``hook(record)`` after every call; returns a function removing it."""
@@ -272,6 +278,7 @@ class PollLayer:
     async def _measure(self, call: Call, call_next: Callable[[Call], Awaitable[Any]]) -> Any:
         clock = self.clock
         stamp, start = clock.now(), clock.monotonic()
+        seq = -1 if self.sequence is None else self.sequence()
         key = (call.name, call.method)
         stats = self.statistics.get(key)
         if stats is None:
@@ -294,7 +301,7 @@ class PollLayer:
             if self._hooks:
                 record = PollRecord(stamp, call.name, call.interface, call.method,
                                     call.arguments, result, error, duration,
-                                    current_caller.get())
+                                    current_caller.get(), seq)
                 for hook in list(self._hooks):
                     try:
                         hook(record)

@@ -36,7 +36,7 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
-from afa.clock import Clock, WallClock
+from afa.clock import Clock, VirtualClock, WallClock
 from afa.component import Component, Context, Health, PublishServerReactor, RestartPolicy, State
 from afa.errors import ComponentError, StartupError, TaskFailed
 from afa.events import Event, EventChannel, Overflow, Subscription
@@ -151,7 +151,7 @@ class System:
         self.clock: Clock = clock or WallClock()
         self.channel = EventChannel(self.clock)
         self.registry = NameRegistry(self.clock)
-        self.polls = PollLayer(self.clock)
+        self.polls = PollLayer(self.clock, lambda: self.channel.published)
         if real_devices is None:
             real_devices = os.environ.get(FORBID_REAL_DEVICES, "") not in ("1", "true", "yes")
         self.real_devices = real_devices
@@ -374,7 +374,9 @@ class System:
         ``until`` is set (a simulated mission finished, say). Raises TaskFailed as soon as
         a task of the system (not of a component) fails.
 
-        When the duration or ``until`` ends it, services with a ``finish_instant()``
+        When the duration or ``until`` ends it, the rest of that instant runs (a virtual
+        clock fires the other timers due then, one at a time), then services with a
+        ``finish_instant()``
         coroutine are awaited (a lock-step bridge lets every process finish the last
         instant), so that what happens at the end time is the same whether the system is
         one process or several.
@@ -399,6 +401,11 @@ class System:
         await _first_of(*waiters)
         self._raise_failures()
         if (duration is not None or until is not None) and not self._stop_requested.is_set():
+            if isinstance(self.clock, VirtualClock):
+                # the rest of the last instant: its other timers fire one at a time
+                # (decision 0027), as they would have had the run gone on
+                await _first_of(self.clock.settle(), self._failed.wait())
+                self._raise_failures()
             for service in self._started_services:
                 finish = getattr(service, "finish_instant", None)
                 if finish is not None:

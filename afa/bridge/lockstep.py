@@ -93,13 +93,21 @@ class SteppedClock(VirtualClock):
         return self._next_deadline()
 
     def grant(self, deadline: float) -> None:
-        """Move to ``deadline`` and run every timer due by then, in order."""
+        """Move to ``deadline``: timers due before it run at once, in order; those due at
+        it run one at a time with the loop idle in between, as on any virtual clock
+        (decision 0027), before :meth:`settle` returns."""
         if deadline < self._t:
             raise ComponentError(f"lock-step: time cannot go back from {self._t} to "
                                  f"{deadline}")
-        while (due := self._next_deadline()) is not None and due <= deadline:
+        while (due := self._next_deadline()) is not None and due < deadline:
             self._fire_next()
         self._t = deadline
+        if (due := self._next_deadline()) is not None and due <= deadline:
+            try:
+                self._ensure_driver()
+            except RuntimeError:  # no running loop: the next settle() starts the driver
+                return
+            self._poke()
 
     def set_start(self, start: float) -> None:
         """Take the stamp origin of the time master (before anything ran)."""

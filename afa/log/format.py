@@ -80,6 +80,7 @@ class PollCallIDL(IDLModel):
     """One finished poll, as the poll layer's recording hook heard it."""
 
     idl_name = "afa.log.PollCall"
+    idl_version = 2  # 2: seq
 
     caller: str = field("", unit="", description="the calling component ('' outside one)")
     server: str = field(unit="", description="the server's full name, Raptor/ModelService")
@@ -91,6 +92,8 @@ class PollCallIDL(IDLModel):
     error_kind: str = field("", unit="", description="the afa exception class, '' if none")
     error_message: str = field("", unit="", description="the exception's message")
     duration: float = field(0.0, unit="s", description="how long the call took (clock)")
+    seq: int = field(-1, unit="1", description="sequence number of the last event published "
+                                               "when the call was made (-1: not known)")
 
 
 class DroppedIDL(IDLModel):

@@ -401,6 +401,10 @@ class Player:
         self.unchecked = sorted(produced - set(self.checked))
         self.outputs = {c.id: c for c in reader.topics(fmt.EVENT)
                         if c.event in self.checked} if check else {}
+        # the re-run's outputs the player watches: to compare them (a check), and to
+        # know when the re-run has made those recorded before an input (every replay)
+        self._watched = sorted((set(self.checked) if check else set()) | {
+            c.event for c in self.replayed.values() if c.event in produced})
 
         self.system = System(robot=self.robot, clock=self.clock,
                              base_dir=configuration.path.parent, real_devices=False)
@@ -425,9 +429,15 @@ class Player:
         self._produced: dict[tuple[str, ...], deque[tuple[float, Any]]] = {}
         self._watch: list[Any] = []
         self._rerun_names = rerun_names
-        self._inputs = {c.name: [p.name for p in c.ports() if p.direction.value == "subscribes"]
-                        for c in self.rerun}
+        # the instant being delivered (:meth:`_walk`): outputs recorded before the next
+        # input and outputs the re-run has made, by (kind, domain, type, origin)
+        self._instant = float("nan")
+        self._needed: dict[tuple[str, ...], int] = {}
+        self._made: dict[tuple[str, ...], int] = {}
+        self._epoch = 0  # a seek starts a new one; callbacks of an older one do nothing
+        self._final = float("inf")  # the last recorded instant (set when reached)
         self.reissued = 0  #: recorded calls re-issued to re-run servers
+        self._calls_queued = self._calls_done = 0  # what :meth:`_walk` waits for
         self._rerun_servers = {
             join_name(self.robot, str(port.get("name"))) for port in reader.catalog()
             if port.get("direction") == "serves" and port.get("component") in rerun_names}
@@ -467,10 +477,10 @@ class Player:
     async def start(self) -> None:
         """Start the replay system, bind the servants, and begin publishing."""
         system = self.system
+        self._watch = [system.channel.observe(self.robot, name, maxsize=1 << 20,
+                                              policy=Overflow.DROP_NEWEST)
+                       for name in self._watched]
         if self.check_mode:
-            self._watch = [system.channel.observe(self.robot, name, maxsize=1 << 20,
-                                                  policy=Overflow.DROP_NEWEST)
-                           for name in self.checked]
             system.polls.add_hook(self._heard_poll)
         await system.start()
         for name, servant in self.servants.items():
@@ -550,6 +560,7 @@ class Player:
                         span[0], functools.partial(self._at, stamp, group, span[1])))
                     last = stamp
                 if last is not None:
+                    self._final = last
                     await clock.sleep_until(last - self._base)
                 if self.finished.is_set():
                     return
@@ -578,7 +589,7 @@ class Player:
         sequence order: at one instant the order of events matters (the arbiter decides
         on every vote), and the file's order of equal times is not the publishing one."""
         stamp: float | None = None
-        group: list[tuple[float, int, LogMessage, Any]] = []
+        group: list[tuple[float, int, int, LogMessage, Any]] = []
         for message in self.reader.messages(start=first, end=self.last,
                                             channels=self._channels()):
             header = None
@@ -592,23 +603,28 @@ class Player:
                 group = []
             if stamp is None or at > stamp:
                 stamp = at
-            # a poll carries no sequence: it keeps its place after the events before it
-            seq = header[3] if header is not None else (group[-1][1] if group else -1)
-            group.append((seq, len(group), message, header))
+            if header is not None:
+                group.append((header[3], 0, len(group), message, header))
+                continue
+            # a poll comes after the last event published when it was made (its ``seq``;
+            # a recording before PollCall@2 has none: it keeps its place in the file)
+            record = self.reader.decode_wire(message)
+            seq = getattr(record, "seq", -1)
+            if seq < 0:
+                seq = group[-1][0] if group else -1
+            group.append((seq, 1, len(group), message, None))
         if stamp is not None:
             yield stamp, self._ordered(group)
 
     @staticmethod
-    def _ordered(group: list[tuple[float, int, LogMessage, Any]]
+    def _ordered(group: list[tuple[float, int, int, LogMessage, Any]]
                  ) -> list[tuple[LogMessage, Any]]:
-        return [(m, h) for _, _, m, h in sorted(group, key=lambda item: item[:2])]
+        return [(m, h) for *_, m, h in sorted(group, key=lambda item: item[:3])]
 
     def _at(self, stamp: float, group: list[tuple[LogMessage, Any]], latest: float) -> None:
         """One recorded instant, run by the clock as it first shows ``stamp`` (before the
-        re-run's timers due at that stamp): compare what came before, then publish the
-        recorded messages up to the first output of a re-run component; those after it
-        (a GPS fix recorded after Pure Pursuit's timed vote) wait for the re-run's turn
-        at that stamp (:meth:`_after`)."""
+        re-run's timers due at that stamp): compare what came before, then deliver the
+        recorded messages in recorded order (:meth:`_walk`)."""
         if self._upcoming and self._upcoming[0] <= stamp:
             self._upcoming.popleft()
         if self.finished.is_set():
@@ -617,36 +633,65 @@ class Player:
             if self.check_mode and self._verify(before=stamp):
                 self.finished.set()
                 return
+            self._collect()  # outputs of earlier instants (a replay's watches drained)
             self.position = stamp
-            for k, (message, header) in enumerate(group):
-                if self._timed(header, group[:k]) and any(
-                        h is None or h[4] not in self._rerun_names for _, h in group[k:]):
-                    self.system.tasks.spawn(
-                        self._after(group[k:], latest), owner="player instant")
-                    return
-                self.delivered += 1
-                self._deliver(message, header)
+            self._instant = stamp
+            self._made.clear()
+            self._needed.clear()
+            self._walk(self._epoch, stamp, group, 0, latest, idle=False)
         except Exception as exc:  # never into the clock's driver: fail the replay
             self.failure = exc
             self.finished.set()
 
-    def _timed(self, header: tuple[str, str, float, int, str] | None,
-               before: list[tuple[LogMessage, Any]]) -> bool:
-        """Whether a recorded message is a re-run component's output that nothing earlier
-        at its instant can have caused (none of the events before it is one it
-        subscribes to): its own timer made it, and inputs recorded after it must wait."""
-        if header is None or header[4] not in self._rerun_names:
-            return False
-        inputs = self._inputs.get(header[4], ())
-        return not any(h is not None and _matches(h[1], inputs) for _, h in before)
+    def _walk(self, epoch: int, stamp: float, group: list[tuple[LogMessage, Any]], k: int,
+              latest: float, *, idle: bool = True) -> None:
+        """Deliver the recorded messages of one instant from the ``k``-th, in recorded
+        order, holding each input until the re-run has made every output recorded
+        before it at this instant (decision 0027).
 
-    async def _after(self, rest: list[tuple[LogMessage, Any]], latest: float) -> None:
-        """The rest of an instant, at the last time showing its stamp: woken after the
-        re-run tasks its timers woke then."""
-        await self.clock.sleep_until(latest)
-        for message, header in rest:
-            self.delivered += 1
-            self._deliver(message, header)
+        The clock fires one timer at a time and lets the loop go idle in between, so the
+        recorded order of an instant is the order of its timers (the sources' and the
+        re-run components') with each one's consequences after it. The player's own
+        callback comes first (scheduled ``LOOKAHEAD`` ahead, at the earliest time showing
+        the stamp); an input recorded after a re-run output (a GPS fix after Pure
+        Pursuit's timed vote) waits, at each idle point (:meth:`VirtualClock.call_when_idle`
+        ), until that output has been made: then its turn has come among the re-run's
+        timers. An output the re-run does not make (a divergence) holds nothing beyond
+        the instant: once no timer is due within it, the rest is delivered."""
+        if epoch != self._epoch or self.finished.is_set():
+            return  # a seek or the end came in between
+        try:
+            rerun = self._rerun_names
+            while k < len(group):
+                message, header = group[k]
+                if header is not None and header[4] in rerun:  # an output, not delivered
+                    key = ("event", header[0], header[1], header[4])
+                    self._needed[key] = self._needed.get(key, 0) + 1
+                elif (self._needed or self._calls_done < self._calls_queued) and \
+                        not self._caught_up() and not (idle and self._instant_over(latest)):
+                    self.clock.call_when_idle(functools.partial(
+                        self._walk, epoch, stamp, group, k, latest))
+                    return
+                self.delivered += 1
+                self._deliver(message, header)
+                k += 1
+        except Exception as exc:  # never into the clock's driver: fail the replay
+            self.failure = exc
+            self.finished.set()
+
+    def _caught_up(self) -> bool:
+        """Whether the re-run has made, at this instant, every output recorded so far in
+        it."""
+        if self._calls_done < self._calls_queued:  # a re-issued command is under way
+            return False
+        self._collect()
+        made = self._made
+        return all(made.get(key, 0) >= n for key, n in self._needed.items())
+
+    def _instant_over(self, latest: float) -> bool:
+        """At an idle point: whether no timer is due within the instant any more."""
+        deadline = self.clock.next_deadline()
+        return deadline is None or deadline > latest
 
     def _header(self, message: LogMessage) -> tuple[str, str, float, int, str] | None:
         if message.channel.id in self.reader._undecodable:
@@ -688,6 +733,7 @@ class Player:
             self._expected.setdefault(("poll", record.caller, record.server, record.method),
                                       deque()).append((message.time, record))
         if self._reissues(record):
+            self._calls_queued += 1
             self._calls.put_nowait(record)
         servant = self.servants.get(record.server)
         if servant is not None:
@@ -713,6 +759,7 @@ class Player:
                 self.reader.problems.append(
                     f"{self.reader.path}: {record.server}.{record.method} is on "
                     f"{record.interface}, which this afa does not know: not re-issued")
+                self._calls_done += 1
                 continue
             try:
                 arguments = decode_arguments(interface, record.method, bytes(record.arguments))
@@ -723,6 +770,7 @@ class Player:
             except AfaError as exc:  # as the recorded caller, the player carries on
                 log.info("re-issued %s.%s: %s", record.server, record.method, exc)
             self.reissued += 1
+            self._calls_done += 1
 
     # -- controls ------------------------------------------------------------------------
     @property
@@ -785,6 +833,8 @@ class Player:
         self._base = stamp - self.clock.monotonic()
         self.position = stamp
         self.finished.clear()
+        self._epoch += 1
+        self._needed.clear()
         for servant in self.servants.values():
             servant.reset()
 
@@ -802,13 +852,18 @@ class Player:
                                       deque()).append((record.time, record))
 
     def _collect(self) -> None:
+        """Take the re-run's outputs from the watches: count those of the current
+        instant (:meth:`_walk`), and keep them for comparing in a check."""
         names = self._rerun_names
         for watch in self._watch:
             while (event := watch.get_nowait()) is not None:
                 if event.origin in names:
-                    self._produced.setdefault(("event", event.domain, event.type,
-                                               event.origin), deque()).append(
-                        (event.time, event.body))
+                    key = ("event", event.domain, event.type, event.origin)
+                    if event.time == self._instant:
+                        self._made[key] = self._made.get(key, 0) + 1
+                    if self.check_mode:
+                        self._produced.setdefault(key, deque()).append(
+                            (event.time, event.body))
             if watch.statistics().dropped:
                 self.report.problems.append(
                     f"the check's buffer of {watch.type} overflowed; outputs were lost")
@@ -836,8 +891,10 @@ class Player:
                 t = expected[0][0]
                 found.append(Divergence(t, t - start, topic, origin, "(missing)",
                                         _summary(expected[0][1]), "nothing produced"))
+            # at the end: an output of the last recorded instant or later is not "extra"
+            # (the recording stopped within that instant: its later timers did not fire)
             if produced and produced[0][0] < horizon and not expected and (
-                    before is not None or produced[0][0] <= fmt.from_ns(self.reader.end)):
+                    before is not None or produced[0][0] < self._final):
                 t = produced[0][0]
                 found.append(Divergence(t, t - start, topic, origin, "(extra)",
                                         "nothing recorded", _summary(produced[0][1])))

@@ -394,7 +394,7 @@ class Recorder:
             caller=record.caller, server=record.name, interface=interface_name(interface),
             method=record.method, arguments=np.frombuffer(arguments, np.uint8),
             result=np.frombuffer(result, np.uint8), error_kind=error[0],
-            error_message=error[1], duration=record.duration)
+            error_message=error[1], duration=record.duration, seq=record.seq)
         key = ("poll", record.name, record.method)
         channel = self._channels.get(key)
         if channel is None:

@@ -114,7 +114,9 @@ class HeightStabiliser:
         """``world_from_vehicle`` with its height replaced by the stabilised one."""
         pose = np.array(world_from_vehicle, dtype=np.float64)
         measured = float(pose[2, 3])
-        if self._last is None or time <= self._last[0]:
+        # a second pose at the same stamp (a GPS fix and an IMU sample of one instant)
+        # continues the filter with dt = 0; only time going back starts it again
+        if self._last is None or time < self._last[0]:
             self.height = measured
         else:
             t0, previous = self._last

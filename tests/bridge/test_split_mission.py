@@ -7,9 +7,12 @@ outcome as one process:
   its end: every waypoint in order, no collision, the completion time and the distance
   within 5 % of one process's (why not identical: docs/distributed.md);
 - with ModelServer moved to the second process, consuming GPS and IMU from the first and
-  its Pose stream crossing back, the first seconds are identical to one process:
-  distance, collisions, waypoints, the vehicle's final state, the pose error, and every
-  event stream (per-name digests).
+  its Pose stream crossing back, the first seconds agree with one process: the same
+  time, collisions, waypoints and counts of sensor events and poses, the distance and
+  the pose error within a few percent. (They were identical, digest for digest, while
+  the virtual clock fired a whole instant at once; since it fires one timer at a time,
+  decision 0027, the order within an instant follows timer creation, which a split
+  across processes does not keep.)
 """
 
 from __future__ import annotations
@@ -64,10 +67,14 @@ def test_the_split_raptor_drives_the_mission_as_one_process_does(
     alone = json.loads((tmp_path / "one.json").read_text())
     split = json.loads((tmp_path / "vehicle.json").read_text())
     other_half = json.loads((tmp_path / "autonomy.json").read_text())
-    for key in ("sim_time_s", "distance_m", "collisions", "waypoints_reached", "vehicle",
-                "pose_error", "events"):
+    for key in ("sim_time_s", "collisions", "waypoints_reached"):
         assert split[key] == alone[key], key
-    assert split["event_digests"] == alone["event_digests"]  # every stream, Pose included
+    for name in ("Gps", "Imu", "Laser11", "Laser12", "Stereo", "RaptorOdometry", "Pose"):
+        assert split["events"][name] == alone["events"][name], name
+    assert split["distance_m"] == pytest.approx(alone["distance_m"], rel=TOLERANCE)
+    assert split["pose_error"]["samples"] == alone["pose_error"]["samples"]
+    assert split["pose_error"]["rms_position_m"] == pytest.approx(
+        alone["pose_error"]["rms_position_m"], rel=TOLERANCE)
     assert alone["distance_m"] > 1.0 and alone["pose_error"]["samples"] > 50
     # the parts ran where the configuration says, and talked over the bridge
     assert "modelServer" in other_half["components"]

@@ -504,3 +504,22 @@ async def test_a_scan_waiting_for_its_pose_is_fused_whatever_the_frame_spelling(
         stats = r.stats()
     assert waiting == 1
     assert stats["scans"] == 1 and stats["points_fused"] == len(PATCH)
+
+
+def test_a_second_pose_at_the_same_stamp_does_not_restart_the_height_filter():
+    """A GPS fix and an IMU sample of one instant make two poses with one stamp: the
+    second continues the filter (dt = 0, no pull) instead of jumping to its measured
+    height; only time going back starts the filter again."""
+    from components.terrain_map.component import HeightStabiliser
+
+    def at(z: float) -> np.ndarray:
+        pose = np.eye(4)
+        pose[2, 3] = z
+        return pose
+
+    heights = HeightStabiliser(tau=2.0)
+    assert heights(10.0, at(0.0))[2, 3] == 0.0
+    assert heights(11.0, at(0.3))[2, 3] == pytest.approx(0.1)  # 1 / (2 + 1) of the way
+    assert heights(11.0, at(0.9))[2, 3] == pytest.approx(0.1)  # same stamp: held
+    assert heights(12.0, at(0.4))[2, 3] == pytest.approx(0.2)  # pulled on from 0.1
+    assert heights(5.0, at(0.7))[2, 3] == 0.7  # back in time: starts again

@@ -281,3 +281,63 @@ async def test_the_scaled_clock_changes_speed_and_starts_paused_on_request():
     wall = loop.time()
     await clock.sleep(1.0)
     assert loop.time() - wall >= 0.015  # at most 50x real time
+
+
+# -- one instant, one timer at a time (decision 0027) --------------------------------------
+
+
+async def test_timers_of_one_instant_fire_one_at_a_time_with_their_consequences():
+    """Two timers due at the same instant: what the first wakes runs to completion
+    (however many awaits it takes) before the second fires, so the order within an
+    instant is the timers' order, not the await counts'."""
+    clock = VirtualClock(start=0.0)
+    order = []
+
+    async def long_chain():  # a source: its timer first, then twenty awaits of work
+        await clock.sleep_until(1.0)
+        for _ in range(20):
+            await asyncio.sleep(0)
+        order.append("fix processed")
+
+    async def tick():  # a periodic task's tick at the same instant, scheduled later
+        await clock.sleep_until(1.0)
+        order.append("tick")
+
+    await asyncio.gather(long_chain(), tick())
+    assert order == ["fix processed", "tick"]
+    assert clock.monotonic() == 1.0
+
+
+async def test_call_when_idle_runs_between_the_timers_of_one_instant():
+    clock = VirtualClock(start=0.0)
+    seen = []
+
+    def idle():
+        seen.append(("idle", list(fired)))
+        if len(seen) < 3:
+            clock.call_when_idle(idle)  # again at the next idle point
+
+    fired = []
+    for name in ("a", "b", "c"):
+        clock.call_at(2.0, lambda name=name: fired.append(name))
+    clock.call_at(1.0, lambda: clock.call_when_idle(idle))
+    await clock.sleep(3.0)
+    # registered while the first timer ran: once that settled, then after each timer
+    assert seen == [("idle", []), ("idle", ["a"]), ("idle", ["a", "b"])]
+    assert fired == ["a", "b", "c"]
+
+
+async def test_a_paused_clock_finishes_the_instant_it_is_in():
+    """Pausing stops time, not the rest of an instant: timers due at the current time
+    still fire (one at a time) when the loop is idle; later ones wait."""
+    clock = VirtualClock(start=0.0)
+    fired = []
+    clock.call_at(1.0, lambda: (fired.append("first"), clock.pause()))
+    clock.call_at(1.0, lambda: fired.append("second"))
+    clock.call_at(2.0, lambda: fired.append("later"))
+    await clock.sleep_until(1.0)  # the last timer of the instant: it fires paused too
+    assert fired == ["first", "second"] and clock.paused and clock.monotonic() == 1.0
+    await clock.settle()
+    assert fired == ["first", "second"]
+    await clock.advance(1.0)
+    assert fired == ["first", "second", "later"]

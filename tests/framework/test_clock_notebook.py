@@ -179,4 +179,5 @@ async def test_running_until_stopped_leaves_a_paused_clock_to_its_owner():
         clock.pause()
         system.request_stop()
         await runner
+        await clock.settle()  # the rest of the instant: the tick due at 1.0 (decision 0027)
         assert clock.monotonic() == pytest.approx(1.0) and ticker.n == 11

@@ -360,3 +360,28 @@ async def test_a_recording_hook_hears_which_component_made_the_call():
         await clock.advance(0.1)
         await system.proxy(Sensor, "Sensor").setGain(3.0)  # outside any component
     assert sorted(r.caller for r in records) == ["", "A", "B"]
+
+
+async def test_a_poll_record_carries_the_last_event_sequence_when_the_call_was_made():
+    """Where a call stands among the events of its instant (decision 0027): the event
+    channel's last sequence number at the call's start."""
+    clock = VirtualClock(start=0.0)
+    server = SensorServer(clock)
+
+    class Host(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.serves(Sensor, "Sensor", impl=server)
+
+    system = System([Host("Host")], clock=clock)
+    records = []
+    system.polls.add_hook(records.append)
+    async with system:
+        proxy = system.proxy(Sensor, "Sensor")
+        before = system.channel.published
+        await proxy.setGain(1.0)
+        for _ in range(3):
+            system.channel.publish("Robot", "Reading", Reading(value=1.0))
+        await proxy.setGain(2.0)
+    assert [r.seq for r in records] == [before, before + 3]
+    assert PollLayer(clock).sequence is None  # a bare layer: no channel, seq -1

@@ -85,6 +85,65 @@ async def test_an_autonomous_recording_re_runs_identically(recorded_autonomous):
     assert any(len(set(s.round(9).tolist())) > 2 for s in scores)
 
 
+LONG_AUTONOMOUS_SECONDS = 20.0
+
+
+async def test_a_long_autonomous_recording_re_runs_identically(tmp_path, record):
+    """Past the instants where a GPS fix, the pose made from it and Pure Pursuit's timed
+    vote share a stamp (the 6 s recording has none; before decision 0027 a 20 s one
+    diverged at 9.47 s): the clock fires one timer at a time and the player holds each
+    recorded input until the outputs recorded before it are made, so the order of every
+    instant is reproduced. The control station's commands (waypoints, the planning
+    boundary) are placed among the events by their recorded sequence."""
+    from afa.log.reader import LogReader
+
+    path = tmp_path / "long.mcap"
+    await record(path, seconds=LONG_AUTONOMOUS_SECONDS, teleop=False)
+    report = await check(path)
+    assert report.identical, report.text()
+    assert report.compared["/Raptor/ArcDecision"] >= 100
+    assert report.compared["/Raptor/PlanMap"] >= 5
+    with LogReader(path) as reader:  # instants where a source's input and a re-run
+        shared = _shared_instants(reader)  # component's timed output share a stamp
+    assert shared >= 10
+
+
+def test_recorded_polls_stand_among_the_events_they_came_between(recorded_autonomous):
+    """A recorded call carries the last event sequence number at its start; the player
+    orders each instant by it (a re-issued ``setPlanningBoundary`` after the Traverse
+    map it followed, not before every event of its instant)."""
+    player = Player(recorded_autonomous, speed=None, check=True)
+    try:
+        placed = 0
+        for _, group in player._instants(player.first):
+            last_event = last_poll = -1
+            for message, header in group:
+                if header is not None:  # events in sequence, each after the calls
+                    assert header[3] > max(last_event, last_poll)  # made before it
+                    last_event = header[3]
+                    continue
+                record = player.reader.decode_wire(message)
+                assert record.seq >= max(last_event, last_poll, 0)
+                last_poll = record.seq
+                if last_event >= 0:  # an event of this instant came before it
+                    placed += 1
+        assert placed > 10
+    finally:
+        player.reader.close()
+
+
+def _shared_instants(reader) -> int:
+    """Stamps at which a GPS fix and a Pure Pursuit vote were both recorded."""
+    from afa.events import peek_envelope
+
+    stamps: dict[float, set[str]] = {}
+    channels = {c.id for c in reader.topics("event") if c.event in ("Gps", "ArcVote")}
+    for message in reader.messages(channels=channels):
+        _, kind, stamp, _, origin = peek_envelope(message.data)
+        stamps.setdefault(stamp, set()).add(kind if kind == "Gps" else origin)
+    return sum(1 for names in stamps.values() if {"Gps", "purePursuit"} <= names)
+
+
 async def test_a_changed_arbiter_weight_diverges_on_the_decision(recorded_autonomous,
                                                                  variant):
     report = await check(recorded_autonomous, variant(
