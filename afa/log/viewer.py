@@ -22,6 +22,13 @@ ArcVoteIDL                        ``/viz/<event>``        ``foxglove.SceneUpdate
 Each converter is a pure function of the body (no clock, no I/O); :class:`ViewerConverter`
 picks one per body type and remembers which sensors have a sequence form, so a laser's
 points are drawn once, not once per form.
+
+**Display rates.** Votes and maps are drawn at most every :data:`VOTE_INTERVAL` (per
+behaviour) and :data:`GRID_INTERVAL` (per map topic) seconds of their own time stamps:
+a viewer refreshes no faster, and at full rate the two were two thirds of a recording's
+bytes (a 27-arc scene for each of ~80 votes a second, a 160 × 160 grid four times a
+second as JSON). The afa events themselves are always recorded whole; poses, frames and
+points are drawn at full rate.
 """
 
 from __future__ import annotations
@@ -52,6 +59,7 @@ from idl import (
 from idl._base import IDLModel
 
 __all__ = ["WORLD_FRAME", "VEHICLE_FRAME", "TF_TOPIC", "SCHEMAS", "ViewerMessage",
+           "VOTE_INTERVAL", "GRID_INTERVAL",
            "ViewerConverter", "pose_in_frame", "frame_transform", "point_cloud", "grid",
            "arc_votes", "quaternion", "viewer_topic"]
 
@@ -60,6 +68,10 @@ WORLD_FRAME = "world"
 #: The vehicle reference frame a Pose's HTransform is ^W T_V of (idl.PoseTransformIDL).
 VEHICLE_FRAME = "Raptor:RearAxleCenter"
 TF_TOPIC = "/viz/tf"
+#: Least time (s, of the bodies' stamps) between two drawings of one behaviour's votes
+#: and of one map topic (module docstring: display rates).
+VOTE_INTERVAL = 0.5
+GRID_INTERVAL = 1.0
 #: How far an arc of ArcVoteIDL is drawn (m) and with how many points.
 ARC_LENGTH = 6.0
 ARC_POINTS = 13
@@ -335,6 +347,7 @@ class ViewerConverter:
 
     def __init__(self) -> None:
         self._sequence_sensors: set[tuple[str, int]] = set()
+        self._drawn: dict[tuple[str, str], float] = {}  # (topic, who) -> last stamp drawn
         self._handlers: dict[type, Callable[[str, str, Any], list[ViewerMessage]]] = {
             PoseTransformIDL: self._pose, Range3dSeqEventIDL: self._sequence,
             Range3dArrayEventIDL: self._sequence, Range3dLaserIDL: self._static,
@@ -343,12 +356,32 @@ class ViewerConverter:
 
     def convert(self, event_type: str, origin: str, body: IDLModel) -> list[ViewerMessage]:
         handler = self._handlers.get(type(body))
-        return [] if handler is None else handler(event_type, origin, body)
+        if handler is None or not self._due(event_type, origin, body):
+            return []
+        return handler(event_type, origin, body)
+
+    def _due(self, event_type: str, origin: str, body: IDLModel) -> bool:
+        """Whether a vote or map is to be drawn now (display rates, module docstring);
+        always for the other bodies."""
+        if type(body) is ArcVoteIDL:
+            key, interval = (event_type, f"{origin}/{body.behaviour}"), VOTE_INTERVAL
+        elif type(body) in _MAP_LAYERS:
+            key, interval = (event_type, f"{origin}/{type(body).__name__}"), GRID_INTERVAL
+        else:
+            return True
+        stamp = body.time.to_seconds()  # type: ignore[attr-defined]
+        last = self._drawn.get(key)
+        if last is not None and last <= stamp < last + interval:
+            return False
+        self._drawn[key] = stamp  # (a stamp going back, a replay's seek: drawn again)
+        return True
 
     def encode(self, event_type: str, origin: str, body: IDLModel
                ) -> list[tuple[str, str, bytes]]:
         """:meth:`convert` as JSON bytes, what the recorder writes (votes the fast way)."""
         if type(body) is ArcVoteIDL:
+            if not self._due(event_type, origin, body):
+                return []
             return [(viewer_topic(event_type), "foxglove.SceneUpdate", arc_votes_json(body))]
         return [(topic, schema, dumps(message))
                 for topic, schema, message in self.convert(event_type, origin, body)]

@@ -161,3 +161,49 @@ def test_a_recorded_simulation_has_viewer_channels_with_foxglove_schema_names(re
         for message in reader.messages(channels=[viewer["/viz/tf"].id]):
             frames.add(json.loads(message.data)["child_frame_id"])
     assert {"FrontNoddingSICKLeft:AxleCenterFreeEnd", "Digiclops:ImagePlane"} <= frames
+
+
+def test_votes_and_maps_are_drawn_at_display_rates_poses_at_every_stamp():
+    """100 votes a second from each of two behaviours, four maps a second and a pose at
+    every vote, for 2 s of stamps: each behaviour's votes are drawn every
+    VOTE_INTERVAL, the maps every GRID_INTERVAL, every pose; a stamp going back (a
+    replay's seek) is drawn again."""
+    from afa.log.viewer import GRID_INTERVAL, VOTE_INTERVAL
+
+    converter = ViewerConverter()
+    drawn: dict[str, list[float]] = {}
+
+    def vote(t, behaviour):
+        return ArcVoteIDL(time=TimeIDL.from_seconds(t), behaviour=behaviour,
+                          curvatures=np.array([-0.2, 0.0, 0.2]), veto=np.zeros(3, bool),
+                          vote=np.array([0.0, 1.0, 0.5]), certainty=np.ones(3),
+                          maxSpeed=np.ones(3))
+
+    def terrain(t):
+        fields = header()
+        fields["time"] = TimeIDL.from_seconds(t)
+        heights = np.zeros((4, 3), np.float32)
+        return MapArrayEventIDL(**fields, elevation=heights, minHeight=heights,
+                                maxHeight=heights, pointCount=np.zeros((4, 3), np.int32),
+                                variance=heights)
+
+    for k in range(200):
+        t = 100.0 + k / 100.0
+        for behaviour in ("PurePursuit", "FindPath"):
+            for _, _, message in converter.encode("ArcVote", behaviour, vote(t, behaviour)):
+                drawn.setdefault(behaviour, []).append(t)
+        pose = PoseTransformIDL(time=TimeIDL.from_seconds(t), HTransform=np.eye(4),
+                                initialUTM=np.zeros(3))
+        drawn.setdefault("Pose", []).extend(
+            t for topic, _, _ in converter.encode("Pose", "ms", pose) if topic == "/viz/Pose")
+        if k % 25 == 0:
+            for _ in converter.encode("Terrain", "terrain", terrain(t)):
+                drawn.setdefault("Terrain", []).append(t)
+    expected_votes = [100.0 + VOTE_INTERVAL * n for n in range(int(2 / VOTE_INTERVAL))]
+    for behaviour in ("PurePursuit", "FindPath"):
+        assert drawn[behaviour] == pytest.approx(expected_votes)
+    assert drawn["Terrain"] == pytest.approx(
+        [100.0 + GRID_INTERVAL * n for n in range(int(2 / GRID_INTERVAL))])
+    assert len(drawn["Pose"]) == 200
+    # seeking back draws at once
+    assert converter.encode("ArcVote", "PurePursuit", vote(100.1, "PurePursuit"))
