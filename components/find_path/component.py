@@ -18,11 +18,16 @@ runs one cycle every ``PlanEventInterval`` seconds:
    budget beyond which an exact from-scratch plan is cheaper. If the vehicle is more than
    ``TrackingTolerance`` cells from the path it was following, the plan is rebuilt from
    scratch, as the seed's "forced to re-plan";
-5. tracking: the look-ahead point is the farthest point of the path between
-   ``MinLookahead`` and ``MaxLookahead`` cells along it to which the path runs nearly
-   straight (within half a cell); the vote is a Gaussian around the curvature that
-   reaches it (κ = 2y/D²), published as an ``ArcVote`` (behaviour ``FindPath``), and
-   the path as ``PlannedPath`` for displays. With no path (no route, the goal impassable
+5. a drivable path (:mod:`components.find_path.kinematic`, decision 0024): forward arcs
+   within the arc set's curvature, the body as discs, from the vehicle to the D* path's
+   point ``RefineDistance`` ahead; the vote is a narrow Gaussian around the curvature
+   that reaches its point 1.5 m ahead (κ = 2y/D²). When there is none (the vehicle
+   stands where no forward path leads onto the plan) every arc is vetoed and the
+   arbiter backs out. With refinement off (``RefineDistance`` 0) the look-ahead point is
+   the farthest point of the D* path between ``MinLookahead`` and ``MaxLookahead`` cells
+   along it to which the path runs nearly straight (within half a cell). The vote is
+   published as an ``ArcVote`` (behaviour ``FindPath``), and the D* path as
+   ``PlannedPath`` for displays. With no path (no route, the goal impassable
    and no free cell within its tolerance, or the vehicle off the map) the vote vetoes
    every arc, as the seed says, and the ``PlannedPath`` is empty (cost inf), so a display
    does not keep showing a path FindPath no longer has.
@@ -210,11 +215,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             self._no_path(grid, waypoint)
             return
         self.path = self.planner.path()
-        points = self._track(grid, (x, y, yaw))
-        # A path for a point but no drivable way onto it from here: every arc is vetoed
-        # (the arbiter backs out to make room) and the votes still say where the D* path
-        # goes, so the back-out swings the nose towards it (decision 0018).
-        undrivable = points is None
+        self.refined, undrivable = self._refine(grid, (x, y, yaw))
         if self.refined is not None:
             # a drivable path starts at the vehicle: steer by its next metres (pursuit
             # of a point on an arc through the vehicle gives that arc's curvature), a
@@ -222,9 +223,12 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             point = self.refined.at(REFINED_LOOKAHEAD)
             spread = 0.1  # m of miss at the look-ahead point, one σ
         else:
-            if points is None:
-                points = [grid.centre(c) for c in self.path]
-            point = self._lookahead(points, (x, y), grid.gridsize)
+            # the D* path (refinement off, or no drivable way onto the plan: then every
+            # arc is vetoed below, the arbiter backs out to make room, and the votes
+            # still say where the plan goes, so the back-out swings the nose towards it,
+            # decision 0018)
+            point = self._lookahead([grid.centre(c) for c in self.path], (x, y),
+                                    grid.gridsize)
             spread = 1.0  # as Pure Pursuit
         ahead, left = to_vehicle_frame(point[0], point[1], x, y, yaw)
         kappa = pursuit_curvature(ahead, left, self.arcs.max_curvature)
@@ -292,22 +296,21 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.counters["replans"] += 1
         return self.planner.replan()
 
-    def _track(self, grid: CostGrid, pose: tuple[float, float, float]
-               ) -> list[tuple[float, float]] | None:
-        """The points to track: a drivable path to the D* path's point ``RefineDistance``
-        ahead (:mod:`components.find_path.kinematic`), in any heading; None when there is
-        none (the vehicle must back out first); the D* path's cell centres when
-        refinement is off."""
+    def _refine(self, grid: CostGrid, pose: tuple[float, float, float]
+                ) -> tuple[Refined | None, bool]:
+        """A drivable path (:mod:`components.find_path.kinematic`) from the vehicle to
+        the D* path's point ``RefineDistance`` ahead (its end if nearer), in any heading:
+        beyond a gate, the gate aligns it. Returns the path, and whether the search
+        found none (the vehicle must back out first); (None, False) when refinement is
+        off or the path is a single cell."""
         p = self.parameters
+        if p.RefineDistance <= 0.0 or len(self.path) < 2:
+            return None, False
         centres = [grid.centre(c) for c in self.path]
-        self.refined = None
-        if p.RefineDistance <= 0.0 or len(centres) < 2:
-            return centres
         travelled, k = 0.0, 0
         while k + 1 < len(centres) and travelled < p.RefineDistance:
             travelled += math.dist(centres[k], centres[k + 1])
             k += 1
-        target = (*centres[k], None)  # any heading: beyond a gate, the gate aligns it
         if self._refiner is None:
             self._refiner = Refiner(0.9 * self.arcs.max_curvature, tuple(p.DiscOffsets),
                                     p.DiscRadius, hazard_margin=0.5 * grid.gridsize)
@@ -317,14 +320,10 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         # so it may pass closer than D* would, where the body fits (a slalom's gap).
         cost = np.where(np.isfinite(grid.cost), grid.cost,
                         np.where(blocked, np.inf, 2.0 * p.MarginCost))
-        refined = self._refiner.plan(blocked, cost, grid.origin, grid.gridsize, pose, target,
-                                     curvature=self._steering)
-        if refined is None:
-            self.counters["undrivable"] += 1
-            return None
-        self.counters["refined"] += 1
-        self.refined = refined
-        return [(q[0], q[1]) for q in refined.poses]
+        refined = self._refiner.plan(blocked, cost, grid.origin, grid.gridsize, pose,
+                                     (*centres[k], None), curvature=self._steering)
+        self.counters["refined" if refined is not None else "undrivable"] += 1
+        return refined, refined is None
 
     def _lookahead(self, points: list[tuple[float, float]], vehicle: tuple[float, float],
                    gridsize: float) -> tuple[float, float]:
