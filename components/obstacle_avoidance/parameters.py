@@ -80,6 +80,14 @@ class ObstacleAvoidanceParameters(Parameters):
         description="afa addition: where along the body (m ahead of the rear axle) a disc "
                     "of VehicleRadius is swept along each arc; together they cover the "
                     "body from the rear axle to the front bumper")
+    HazardMargin: Annotated[float, Field(ge=0)] = param(
+        0.0, unit="m",
+        description="afa addition: how far inside its cell's edges a hazard is taken to "
+                    "lie (each hazard cell shrunk by it on every side, up to half a cell: "
+                    "its centre). 0 is the conservative reading (a hazard anywhere in its "
+                    "cell); the Traversability Map marks the cells beside a step as hazards "
+                    "too, so a hazard cell's obstacle lies half a cell or more beyond its "
+                    "centre")
     VetoDistance: Annotated[float, Field(gt=0)] = param(
         2.5, unit="m",
         description="afa addition: an arc is vetoed when its first obstacle lies within "

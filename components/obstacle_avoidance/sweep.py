@@ -23,7 +23,11 @@ of the rear axle (``disc_offsets``, default the rear axle alone) and carried alo
 arc; samples are taken every ``CurveMakingConst`` metres of rear-axle travel,
 s = 0, c, 2c, … up to the arc's horizon. A cell is *under the disc* when its closed
 square and the closed disc intersect (nearest point of the square within the radius): a
-hazard anywhere in a cell may be anywhere in it, so the test is conservative. Several
+hazard anywhere in a cell may be anywhere in it, so the test is conservative. With a
+``margin`` (``HazardMargin``) each square is first shrunk by it on every side, down to
+its centre at half a cell: the Traversability Map marks the cells beside a step as
+hazards too, so a hazard cell's obstacle lies half a cell or more beyond its centre
+(decision 0024). Several
 offsets give a union of discs; (0, 2.45) with radius 0.7 covers the Raptor's swept body
 on every arc, since on a turn the front swings outside the rear axle's circle.
 
@@ -208,7 +212,7 @@ class SweepTables:
 def build_sweep_tables(arcs: ArcSet, geometry: MapGeometry, *, radius: float, step: float,
                        near_zone: int, far_zone: int, map_frame: tuple[float, float],
                        disc_offsets: Sequence[float] = (0.0,),
-                       horizon: float | None = None) -> SweepTables:
+                       horizon: float | None = None, margin: float = 0.0) -> SweepTables:
     """Walk every arc once and tabulate the cells its discs touch (module docstring).
 
     ``radius`` is ``VehicleRadius``, ``step`` ``CurveMakingConst`` (m); ``near_zone`` /
@@ -241,7 +245,7 @@ def build_sweep_tables(arcs: ArcSet, geometry: MapGeometry, *, radius: float, st
     horizons = np.array([horizon if kappa == 0.0 else min(horizon, math.pi / abs(kappa))
                          for kappa in arcs.curvatures.tolist()])
     per_arc = [_arc_cells(kappa, s_k, step, offsets, geometry, (fx, fy), radius,
-                          (row_lo, row_hi))
+                          (row_lo, row_hi), margin)
                for kappa, s_k in zip(arcs.curvatures.tolist(), horizons.tolist(), strict=True)]
 
     width = max(len(c) for c, _ in per_arc) + 1  # every row ends in a pad entry
@@ -262,7 +266,8 @@ def build_sweep_tables(arcs: ArcSet, geometry: MapGeometry, *, radius: float, st
 
 def _arc_cells(kappa: float, s_k: float, step: float, offsets: tuple[float, ...],
                geometry: MapGeometry, map_frame: tuple[float, float], radius: float,
-               rows: tuple[int, int]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+               rows: tuple[int, int], margin: float = 0.0
+               ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
     """One arc's table row: the cells its discs touch (flat indices) and each one's reach
     (the first sample's arc length), ordered by reach, then cell.
 
@@ -277,7 +282,7 @@ def _arc_cells(kappa: float, s_k: float, step: float, offsets: tuple[float, ...]
     points = [arc_points(s, kappa, offset) for offset in offsets]
     xm = np.concatenate([x for x, _, _ in points]) - map_frame[0]
     ym = np.concatenate([y for _, y, _ in points]) - map_frame[1]
-    sample, flat = _touched(xm, ym, geometry, radius, rows)
+    sample, flat = _touched(xm, ym, geometry, radius, rows, margin)
     pad = geometry.rows * geometry.cols
     first = np.full(pad, np.inf)
     np.minimum.at(first, flat, s[sample % s.shape[0]])
@@ -288,7 +293,8 @@ def _arc_cells(kappa: float, s_k: float, step: float, offsets: tuple[float, ...]
 
 
 def _touched(xm: NDArray[np.float64], ym: NDArray[np.float64], geometry: MapGeometry,
-             radius: float, rows: tuple[int, int]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+             radius: float, rows: tuple[int, int], margin: float = 0.0
+             ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Every (sample, flat cell) pair such that the closed disc of ``radius`` around map
     point (xm, ym)[sample] meets the cell's closed square, for cells in the evaluated
     ``rows`` and the map's columns."""
@@ -298,8 +304,9 @@ def _touched(xm: NDArray[np.float64], ym: NDArray[np.float64], geometry: MapGeom
     j = np.floor((ym - radius - geometry.origin_y) / g).astype(np.intp)[:, None] + span
     x0 = geometry.origin_x + i * g
     y0 = geometry.origin_y + j * g
-    dx = np.maximum(np.maximum(x0 - xm[:, None], xm[:, None] - (x0 + g)), 0.0)
-    dy = np.maximum(np.maximum(y0 - ym[:, None], ym[:, None] - (y0 + g)), 0.0)
+    m = min(max(margin, 0.0), 0.5 * g)  # the square shrunk by the margin on every side
+    dx = np.maximum(np.maximum(x0 + m - xm[:, None], xm[:, None] - (x0 + g - m)), 0.0)
+    dy = np.maximum(np.maximum(y0 + m - ym[:, None], ym[:, None] - (y0 + g - m)), 0.0)
     dx2, dy2 = dx * dx, dy * dy
     dx2[(i < rows[0]) | (i >= rows[1])] = np.inf  # outside: never within the radius
     dy2[(j < 0) | (j >= geometry.cols)] = np.inf
@@ -453,7 +460,8 @@ class ArcSweeper:
             tables = build_sweep_tables(
                 self.arcs, geometry, radius=p.VehicleRadius, step=p.CurveMakingConst,
                 near_zone=p.NearZone, far_zone=p.FarZone, map_frame=self.map_frame,
-                disc_offsets=self.disc_offsets, horizon=self.horizon)
+                disc_offsets=self.disc_offsets, horizon=self.horizon,
+                margin=p.HazardMargin)
             self._scorer = ArcSweepScorer(tables, p, hazard_threshold=self.hazard_threshold)
             self.tables_built += 1
         return self._scorer

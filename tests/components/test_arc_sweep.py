@@ -420,3 +420,24 @@ def test_a_different_arc_set_gets_its_own_tables():
     small = ArcSet.from_parameters(ArcSetParameters(Count=5))
     result = sweeper(small, params(), RAPTOR_EGO).score(np.zeros((32, 32)), np.ones((32, 32)))
     assert len(result.votes) == 5
+
+
+def test_a_hazard_margin_takes_hazards_at_their_cells_centres(arcs):
+    """HazardMargin shrinks each hazard cell (to its centre at half a cell): a gap whose
+    hazard cells' centres are 2 m apart (1.5 m between their edges) is shut to a 1.4 m
+    body read conservatively and open to the straight arc read at the centres; one whose
+    centres are 1 m apart stays shut either way."""
+    good = np.ones((32, 32), np.float32)
+    conservative = sweeper(arcs, params(), RAPTOR_EGO)
+    centred = sweeper(arcs, params(HazardMargin=0.25), RAPTOR_EGO)
+    reaching = arcs_reaching_row(conservative.tables, 10)
+    # columns 14..16 free: y -1.0 .. 0.5, hazard centres at y -1.25 and 0.75
+    gap = wall_with_gap(range(14, 17))
+    shut = conservative.score(gap, good).votes.veto
+    opened = centred.score(gap, good).votes.veto
+    assert np.all(shut[reaching])
+    assert not np.all(opened[reaching])
+    assert np.all(opened <= shut)  # the margin only ever opens arcs
+    # one free column (0.5 m): centres 1 m apart, no room for a 1.4 m body either way
+    slit = wall_with_gap(range(15, 16))
+    assert np.all(centred.score(slit, good).votes.veto[reaching])

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from afa import System, VirtualClock
 from components.arcs import DESIGN_VEHICLE_WIDTH
@@ -187,6 +188,11 @@ async def test_a_gap_narrower_than_the_vehicle_vetoes_every_arc_through_it(cell,
     assert (last - first) * cell == pytest.approx(gap)  # centred on the straight arc
     hazard[wall, :] = 1.0
     hazard[wall, first:last] = 0.0
+    # as the Traversability Map marks a wall: its cells and, the step beside them, their
+    # neighbours (configs/raptor.xml's HazardMargin takes a hazard cell's obstacle to lie
+    # half a cell beyond its centre because of that)
+    hazard = ndimage.binary_dilation(hazard > 0, structure=np.ones((3, 3), bool)
+                                     ).astype(np.float32)
     vote = await scored(hazard, cell, radius)
     gap_cells = {(wall, j) for j in range(first, last)}
     wall_cells = {(wall, j) for j in range(hazard.shape[1])}

@@ -190,7 +190,7 @@ def test_votes_and_maps_are_drawn_at_display_rates_poses_at_every_stamp():
     for k in range(200):
         t = 100.0 + k / 100.0
         for behaviour in ("PurePursuit", "FindPath"):
-            for _, _, message in converter.encode("ArcVote", behaviour, vote(t, behaviour)):
+            if converter.encode("ArcVote", behaviour, vote(t, behaviour)):
                 drawn.setdefault(behaviour, []).append(t)
         pose = PoseTransformIDL(time=TimeIDL.from_seconds(t), HTransform=np.eye(4),
                                 initialUTM=np.zeros(3))
