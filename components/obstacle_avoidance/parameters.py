@@ -81,13 +81,13 @@ class ObstacleAvoidanceParameters(Parameters):
                     "of VehicleRadius is swept along each arc; together they cover the "
                     "body from the rear axle to the front bumper")
     HazardMargin: Annotated[float, Field(ge=0)] = param(
-        0.0, unit="m",
+        0.25, unit="m",
         description="afa addition: how far inside its cell's edges a hazard is taken to "
                     "lie (each hazard cell shrunk by it on every side, up to half a cell: "
-                    "its centre). 0 is the conservative reading (a hazard anywhere in its "
-                    "cell); the Traversability Map marks the cells beside a step as hazards "
-                    "too, so a hazard cell's obstacle lies half a cell or more beyond its "
-                    "centre")
+                    "its centre). The Traversability Map marks the cells beside a step as "
+                    "hazards too, so a hazard cell's obstacle lies half a cell or more "
+                    "beyond its centre (0.25 m at its 0.5 m cells); 0 is the seed's "
+                    "conservative reading, a hazard anywhere in its cell")
     VetoDistance: Annotated[float, Field(gt=0)] = param(
         2.5, unit="m",
         description="afa addition: an arc is vetoed when its first obstacle lies within "

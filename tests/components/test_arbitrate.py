@@ -331,7 +331,8 @@ def test_pursuit_obstacle_avoidance_and_the_safety_catch_decide_together():
     # a rock straight ahead, 3 m past the bumper, slightly right of centre
     hazard = np.zeros((32, 32), np.float32)
     hazard[6:8, 14:17] = 1.0
-    sweeper = ArcSweeper(arcs, ObstacleAvoidanceParameters(VehicleRadius=0.7),
+    # the rock's own cells, read as anywhere in them (no Traversability Map marking round it)
+    sweeper = ArcSweeper(arcs, ObstacleAvoidanceParameters(VehicleRadius=0.7, HazardMargin=0.0),
                          map_frame=(2.45, 0.0), disc_offsets=(0.0, 2.45))
     avoid = sweeper.score(MapGeometry(32, 32, 0.5, 0.0, -8.0), hazard,
                           np.ones((32, 32), np.float32)).votes

@@ -37,9 +37,10 @@ def arcs() -> ArcSet:
 
 def params(**overrides) -> ObstacleAvoidanceParameters:
     """The sweep's geometry alone: any obstacle within the horizon vetoes, unless a test
-    sets VetoDistance (configs/raptor.xml's 2.5 m leaves farther obstacles to the vote)."""
+    sets VetoDistance (configs/raptor.xml's 2.5 m leaves farther obstacles to the vote),
+    and a hazard may lie anywhere in its cell, unless a test sets HazardMargin."""
     return ObstacleAvoidanceParameters(**{"VehicleRadius": 0.7, "VetoDistance": math.inf,
-                                          **overrides})
+                                          "HazardMargin": 0.0, **overrides})
 
 
 _SCORERS: dict[tuple, ArcSweepScorer] = {}
