@@ -64,9 +64,10 @@ REFINED_LOOKAHEAD = 1.5
 class CostGrid:
     """FindPath's copy of the planning map with obstacles grown for the vehicle's size.
 
-    ``raw`` is the map's planning cost; ``cost`` what D* Lite plans on: inf within
-    ``inflation`` cells of an impassable cell, at least ``margin_cost`` within ``margin``
-    cells, ``raw`` elsewhere; cells outside the planning boundary are impassable.
+    ``raw`` is the map's planning cost; ``blocked`` its impassable cells (inf, or outside
+    the planning boundary); ``cost`` what D* Lite plans on: inf within ``inflation``
+    cells of a blocked cell, at least ``margin_cost`` within ``margin`` cells, ``raw``
+    elsewhere.
     """
 
     def __init__(self, plan: PlanMapEventIDL, inflation: float, margin: float,
@@ -80,14 +81,14 @@ class CostGrid:
         b = self.boundary = plan.planningBoundary
         self.inside = np.zeros(self.raw.shape, dtype=bool)
         self.inside[b.minX:b.maxX + 1, b.minY:b.maxY + 1] = True
-        self.cost = self._grow(self.raw, self.inside)
+        self.blocked = ~np.isfinite(self.raw) | ~self.inside
+        self.cost = self._grow(self.raw, self.blocked)
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.raw.shape  # type: ignore[return-value]
 
-    def _grow(self, raw: np.ndarray, inside: np.ndarray) -> np.ndarray:
-        blocked = ~np.isfinite(raw) | ~inside
+    def _grow(self, raw: np.ndarray, blocked: np.ndarray) -> np.ndarray:
         if not blocked.any():
             return raw.copy()
         distance = ndimage.distance_transform_edt(~blocked)
@@ -103,6 +104,9 @@ class CostGrid:
         j0 = int(round((window.originY - self.origin[1]) / g))
         rows, cols = window.rows, window.cols
         self.raw[i0:i0 + rows, j0:j0 + cols] = window.planning_cost()
+        self.blocked[i0:i0 + rows, j0:j0 + cols] = \
+            ~np.isfinite(self.raw[i0:i0 + rows, j0:j0 + cols]) | \
+            ~self.inside[i0:i0 + rows, j0:j0 + cols]
         self.revision = window.revision
         self.initial_utm = np.array(window.initialUTM)
         # the grown cost of a cell depends on raw cells up to `margin` away
@@ -111,7 +115,7 @@ class CostGrid:
         a1, b1 = min(self.shape[0], i0 + rows + reach), min(self.shape[1], j0 + cols + reach)
         c0, d0 = max(0, a0 - reach), max(0, b0 - reach)
         c1, d1 = min(self.shape[0], a1 + reach), min(self.shape[1], b1 + reach)
-        grown = self._grow(self.raw[c0:c1, d0:d1], self.inside[c0:c1, d0:d1])
+        grown = self._grow(self.raw[c0:c1, d0:d1], self.blocked[c0:c1, d0:d1])
         grown = grown[a0 - c0:a1 - c0, b0 - d0:b1 - d0]
         old = self.cost[a0:a1, b0:b1]
         changed = ~((old == grown) | (np.isinf(old) & np.isinf(grown)))
@@ -314,14 +318,12 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         if self._refiner is None:
             self._refiner = Refiner(0.9 * self.arcs.max_curvature, tuple(p.DiscOffsets),
                                     p.DiscRadius, hazard_margin=0.5 * grid.gridsize)
-        blocked = ~np.isfinite(grid.raw) | ~grid.inside
         # The body discs keep the refined path clear; the cells D* leaves out for the
         # rear axle (within InflationRadius) are open to it at twice the margin's cost,
         # so it may pass closer than D* would, where the body fits (a slalom's gap).
-        cost = np.where(np.isfinite(grid.cost), grid.cost,
-                        np.where(blocked, np.inf, 2.0 * p.MarginCost))
-        refined = self._refiner.plan(blocked, cost, grid.origin, grid.gridsize, pose,
-                                     (*centres[k], None), curvature=self._steering)
+        refined = self._refiner.plan(grid.blocked, grid.cost, grid.origin, grid.gridsize,
+                                     pose, (*centres[k], None), curvature=self._steering,
+                                     open_cost=2.0 * p.MarginCost)
         self.counters["refined" if refined is not None else "undrivable"] += 1
         return refined, refined is None
 

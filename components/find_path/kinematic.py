@@ -69,10 +69,7 @@ class Refined:
     poses: list[Pose]
     curvatures: list[float]  # of each motion, len(poses) - 1
     expansions: int
-    step: float = 0.75  # m, the length of each motion
-
-    def points(self) -> NDArray[np.float64]:
-        return np.array([(p[0], p[1]) for p in self.poses], dtype=np.float64)
+    step: float  # m, the length of each motion
 
     def at(self, distance: float) -> tuple[float, float]:
         """The point ``distance`` metres along the path (on its arcs; the end beyond
@@ -131,7 +128,8 @@ class Refiner:
     def plan(self, blocked: NDArray[np.bool_], cost: NDArray[np.float64],
              origin: tuple[float, float], gridsize: float, start: Pose,
              target: tuple[float, float, float | None],
-             curvature: float | None = None) -> Refined | None:
+             curvature: float | None = None, open_cost: float | None = None
+             ) -> Refined | None:
         """A drivable path from ``start`` to ``target`` (x, y, heading or None), or None
         when the search finds none within its window and budget.
 
@@ -139,7 +137,10 @@ class Refiner:
         of every cell (inf where impassable or grown), both indexed [i, j] with x = origin
         + (i + ½)·gridsize; ``curvature``: the one the vehicle steers now, if known, so
         the first motion pays for changing it like every other (a path that starts by
-        flicking the steering the other way makes the vehicle weave).
+        flicking the steering the other way makes the vehicle weave); ``open_cost``: the
+        cost of a cell that ``cost`` closes (inf) but ``blocked`` does not (grown for a
+        point, where the discs decide what fits), None to keep it closed. Only the
+        search's window of either array is read.
         """
         g = gridsize
         shape = blocked.shape
@@ -154,6 +155,9 @@ class Refiner:
             return None
         distances, fine = self._clearance(blocked, gridsize, (i0, i1, j0, j1))
         window_cost = cost[i0:i1, j0:j1]
+        if open_cost is not None:
+            window_cost = np.where(np.isfinite(window_cost) | blocked[i0:i1, j0:j1],
+                                   window_cost, open_cost)
         ox, oy = origin[0] + i0 * g, origin[1] + j0 * g
         ni, nj = window_cost.shape
 
