@@ -335,6 +335,14 @@ async def test_middleware_counts_calls_errors_and_latency_and_hooks_record_calls
     assert isinstance(records[2].error, EOutOfBounds)
 
 
+class SensorHost(SubscribePublishServer):
+    """A component serving a SensorServer's Sensor interface under "Sensor"."""
+
+    def __init__(self, name, server):
+        super().__init__(name)
+        self.serves(Sensor, "Sensor", impl=server)
+
+
 async def test_a_recording_hook_hears_which_component_made_the_call():
     class Poller(SubscribePublishServer):
         def __init__(self, name):
@@ -348,12 +356,7 @@ async def test_a_recording_hook_hears_which_component_made_the_call():
     clock = VirtualClock(start=0.0)
     server = SensorServer(clock)
 
-    class Host(SubscribePublishServer):
-        def __init__(self, name):
-            super().__init__(name)
-            self.serves(Sensor, "Sensor", impl=server)
-
-    system = System([Host("Host"), Poller("A"), Poller("B")], clock=clock)
+    system = System([SensorHost("Host", server), Poller("A"), Poller("B")], clock=clock)
     records = []
     system.polls.add_hook(records.append)
     async with system:
@@ -368,12 +371,7 @@ async def test_a_poll_record_carries_the_last_event_sequence_when_the_call_was_m
     clock = VirtualClock(start=0.0)
     server = SensorServer(clock)
 
-    class Host(SubscribePublishServer):
-        def __init__(self, name):
-            super().__init__(name)
-            self.serves(Sensor, "Sensor", impl=server)
-
-    system = System([Host("Host")], clock=clock)
+    system = System([SensorHost("Host", server)], clock=clock)
     records = []
     system.polls.add_hook(records.append)
     async with system:
