@@ -24,8 +24,13 @@ uncapped incremental repair, as a from-scratch ``rebuild`` and as ``replan()`` (
 within the budget, else rebuild); prints the break-even expansion count behind the
 budget (docs/decisions/0016-dstar-fallback.md).
 
-Usage: ``python benchmarks/planning.py [--sections dstar fallback] [--trials N] [--seed S]
-[--cpu]``
+Section ``refine``: FindPath's kinematic refinement (Hybrid A* over forward arcs,
+decision 0024) into a 3 m gate in a wall, from five approaches (along the wall, square to
+it, from the far side of the gate), each query timed with the compiled search and with
+the Python loop it compiles (decision 0028), interleaved; they return the same path.
+
+Usage: ``python benchmarks/planning.py [--sections dstar fallback refine] [--trials N]
+[--seed S] [--cpu]``
 
 Other sections (arc scoring, arbitration) add a function taking the parsed arguments
 and an entry in ``SECTIONS``.
@@ -327,9 +332,65 @@ def fallback_section(args: argparse.Namespace) -> None:
 
 # ---------------------------------------------------------------------- main
 
+# ---------------------------------------------------------------------- refine section
+
+def gate_scene(cell: float = 0.5, cells: int = 80) -> tuple[np.ndarray, np.ndarray]:
+    """A 0.6 m wall along x = 0 with a gate from y = 8 to 11 m on an 80 × 80 grid of
+    0.5 m from (-20, -20): the blocked cells as the Traversability Map marks them (the
+    wall's cells and their neighbours) and FindPath's grown cost (inf within 1.5 cells,
+    3 within 3 cells)."""
+    from scipy import ndimage
+
+    edges = -20.0 + cell * np.arange(cells + 1)
+    blocked = np.zeros((cells, cells), dtype=bool)
+    across = (edges[:-1] < 0.3) & (edges[1:] > -0.3)
+    for y0, y1 in ((-20.0, 8.0), (11.0, 20.0)):
+        blocked |= np.outer(across, (edges[:-1] < y1) & (edges[1:] > y0))
+    blocked = ndimage.binary_dilation(blocked, structure=np.ones((3, 3), dtype=bool))
+    distance = ndimage.distance_transform_edt(~blocked)
+    cost = np.where(distance <= 3.0, 3.0, 1.0)
+    cost[distance <= 1.5] = np.inf
+    return blocked, cost
+
+
+def refine_section(args: argparse.Namespace) -> None:
+    from components.arcs import max_curvature
+    from components.find_path.kinematic import Refiner
+
+    blocked, cost = gate_scene()
+    starts = {"along the wall": (-3.0, -2.0, math.pi / 2),
+              "near the gate": (-4.0, 2.0, math.pi / 2), "square to it": (-8.0, 0.0, 0.0),
+              "far down it": (-3.0, -5.0, math.pi / 2),
+              "from the north": (-6.0, 14.0, -math.pi / 2)}
+    fast = Refiner(0.9 * max_curvature(30.0, 1.9), (0.0, 0.8, 1.6, 2.4), 0.81,
+                   hazard_margin=0.25)
+    slow = Refiner(0.9 * max_curvature(30.0, 1.9), (0.0, 0.8, 1.6, 2.4), 0.81,
+                   hazard_margin=0.25)
+    slow.kernel = None
+    print("\nKinematic refinement into a 3 m gate (target 4 m beyond it), per query")
+    if fast.kernel is None:
+        print("  no compiled search here (numba missing, or AFA_KERNELS=numpy)")
+        return
+    print("  approach          expansions   compiled    Python   ratio")
+    for name, start in starts.items():
+        times: dict[str, list[float]] = {"fast": [], "slow": []}
+        expansions = 0
+        for _ in range(max(3, args.trials)):
+            for key, refiner in (("fast", fast), ("slow", slow)):
+                t0 = now()
+                refined = refiner.plan(blocked, cost, (-20.0, -20.0), 0.5, start,
+                                       (4.0, 9.5, 0.0))
+                times[key].append(now() - t0)
+                expansions = refined.expansions if refined is not None else -1
+        f, s = median(times["fast"]), median(times["slow"])
+        print(f"  {name:16s}  {expansions:10d}  {f * 1e3:7.2f} ms {s * 1e3:7.1f} ms "
+              f"{s / f:6.1f}x")
+
+
 SECTIONS: dict[str, Callable[[argparse.Namespace], None]] = {
     "dstar": dstar_section,
     "fallback": fallback_section,
+    "refine": refine_section,
 }
 
 

@@ -808,7 +808,8 @@ class RaptorSimulation:
             if isinstance(component, FindPath):
                 stats = component.statistics()
                 found[component.name] = {key: stats.get(key) for key in (
-                    "plans", "replans", "tracking_replans", "no_path", "plan_ms")}
+                    "plans", "replans", "tracking_replans", "no_path", "plan_ms", "refined",
+                    "undrivable", "refine_ms")}
         return found
 
     def course_reference(self) -> dict[str, Any]:

@@ -30,15 +30,14 @@ docs/geometry.md.
 from __future__ import annotations
 
 import functools
-import logging
 import math
-import os
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from afa.kernels import compiled
 from afa.sim.terrain import BLOCK_PAD, Terrain
 
 __all__ = ["cast_rays", "laser_scan", "laser_directions", "camera_directions", "depth_image"]
@@ -47,20 +46,9 @@ FloatArray = NDArray[np.float64]
 
 
 def _load_kernel() -> Callable[..., None] | None:
-    """The compiled caster (decision 0014), or None for the numpy passes: when numba is
-    not installed or cannot compile or cache the kernel here, or ``AFA_KERNELS=numpy``
-    asks for them."""
-    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
-        return None
-    try:
-        from afa.sim._raycast_jit import cast_kernel
-    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
-        if isinstance(exc, ModuleNotFoundError) and exc.name == "numba":
-            return None  # not installed: quietly
-        logging.getLogger(__name__).warning("compiled kernel unavailable (%s): numpy "
-                                            "fallback", exc)
-        return None
-    return cast_kernel  # type: ignore[no-any-return]
+    """The compiled caster (decision 0014), or None for the numpy passes
+    (:func:`afa.kernels.compiled`)."""
+    return compiled("afa.sim._raycast_jit", "cast_kernel")  # type: ignore[no-any-return]
 
 
 #: The compiled caster in use, None when the numpy passes cast (see :func:`_load_kernel`).

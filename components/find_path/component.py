@@ -173,6 +173,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.path: list[tuple[int, int]] = []
         self.refined: Refined | None = None
         self.plan_times: list[float] = []
+        self.refine_times: list[float] = []
         self.counters = {"cycles": 0, "plans": 0, "replans": 0, "tracking_replans": 0,
                          "no_path": 0, "cells_updated": 0, "poll_errors": 0,
                          "refined": 0, "undrivable": 0}
@@ -219,7 +220,10 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             self._no_path(grid, waypoint)
             return
         self.path = self.planner.path()
-        self.refined, undrivable = self._refine(grid, (x, y, yaw))
+        with Stopwatch() as watch:
+            self.refined, undrivable = self._refine(grid, (x, y, yaw))
+        self.refine_times.append(watch.seconds)
+        del self.refine_times[:-1000]
         if self.refined is not None:
             # a drivable path starts at the vehicle: steer by its next metres (pursuit
             # of a point on an arc through the vehicle gives that arc's curvature), a
@@ -361,11 +365,12 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
     def statistics(self) -> dict[str, Any]:
         stats = super().statistics()
         stats.update(self.counters)
-        if self.plan_times:
-            times = np.array(self.plan_times) * 1000.0
-            stats["plan_ms"] = {"mean": round(float(times.mean()), 3),
-                                "p95": round(float(np.percentile(times, 95)), 3),
-                                "max": round(float(times.max()), 3)}
+        for key, seconds in (("plan_ms", self.plan_times), ("refine_ms", self.refine_times)):
+            if seconds:
+                times = np.array(seconds) * 1000.0
+                stats[key] = {"mean": round(float(times.mean()), 3),
+                              "p95": round(float(np.percentile(times, 95)), 3),
+                              "max": round(float(times.max()), 3)}
         if self.planner is not None:
             stats["planner"] = dataclasses.asdict(self.planner.statistics())
         return stats

@@ -40,8 +40,9 @@ merged by cell and heading bin):
 
 The search is confined to a window around start and target and stops after
 ``max_expansions`` states: it answers ``None`` then, and FindPath tracks the D* path as
-before. Pure Python over small arrays; a typical query expands a few dozen states in the
-open and a few thousand where it must swing wide.
+before. A typical query expands a few dozen states in the open and a few thousand where it
+must swing wide. The search loop is compiled (``_search_jit.py``, decision 0028); the
+Python loop in :meth:`Refiner.plan` is its oracle and fallback.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from __future__ import annotations
 import heapq
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,9 +58,15 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-__all__ = ["Refiner", "Refined", "Pose"]
+from afa.kernels import compiled
+
+__all__ = ["Refiner", "Refined", "Pose", "SEARCH_KERNEL"]
 
 Pose = tuple[float, float, float]  # x, y (m, map frame), heading (rad, from +x)
+
+#: The compiled search in use (:mod:`components.find_path._search_jit`), None when the
+#: Python loop searches (``AFA_KERNELS=numpy``, or no numba).
+SEARCH_KERNEL: Any = compiled("components.find_path._search_jit", "search_kernel")
 
 
 @dataclass(frozen=True)
@@ -124,6 +132,11 @@ class Refiner:
                             for s in (0.25 * self.step, 0.5 * self.step, 0.75 * self.step,
                                       self.step))
             self._motions.append((k, samples))
+        self._motion_curvatures = np.array([k for k, _ in self._motions], dtype=np.float64)
+        self._motion_samples = np.array([samples for _, samples in self._motions],
+                                        dtype=np.float64)
+        #: the compiled search (decision 0014), None for the Python loop (its oracle)
+        self.kernel = SEARCH_KERNEL
 
     def plan(self, blocked: NDArray[np.bool_], cost: NDArray[np.float64],
              origin: tuple[float, float], gridsize: float, start: Pose,
@@ -173,7 +186,7 @@ class Refiner:
         togo = _cost_to(window_cost, goal_cell) * (g * self.heuristic_weight)
         if not math.isfinite(togo[start_cell]):
             return None
-        distance_list = distances.tolist()
+        table: Any = distances  # a list of lists for the Python loop, below
         offsets = sorted(self.offsets, reverse=True)  # the front meets obstacles first
         inv = 1.0 / (g / fine)
         mi, mj = distances.shape
@@ -185,7 +198,7 @@ class Refiner:
                 fj = (y + o * s - oy) * inv
                 if not (0.0 <= fi < mi and 0.0 <= fj < mj):
                     return -math.inf
-                least = min(least, distance_list[int(fi)][int(fj)])
+                least = min(least, table[int(fi)][int(fj)])
             return least
 
         # A vehicle already closer to an obstacle than the discs need (squeezed by a
@@ -198,6 +211,10 @@ class Refiner:
         escape_from = min(need, start_clearance)
         escape_rate = self.escape_rate
 
+        if self.kernel is not None:
+            return self._search_compiled(distances, fine, window_cost, togo, (ox, oy), g,
+                                         start, target, curvature, float(escape_from))
+        table = distances.tolist()  # plain floats index faster than an array
         tx, ty, th = target
         tol2 = self.position_tolerance ** 2
         bin_width = 2.0 * math.pi / self.bins
@@ -264,6 +281,44 @@ class Refiner:
                 travel.append(travel[n] + self.step)
                 heapq.heappush(frontier, (total + float(remaining), len(poses) - 1))
         return None
+
+    def _search_compiled(self, distances: NDArray[np.float64], fine: int,
+                         window_cost: NDArray[np.float64], togo: NDArray[np.float64],
+                         corner: tuple[float, float], g: float, start: Pose,
+                         target: tuple[float, float, float | None], curvature: float | None,
+                         escape_from: float) -> Refined | None:
+        """:meth:`plan`'s search by the compiled kernel (``components/find_path/
+        _search_jit.py``): the same states in the same order, the same path."""
+        capacity = self.max_expansions * len(self._motions) + 1
+        poses = np.empty((capacity, 3))
+        parents = np.empty(capacity, dtype=np.int64)
+        kappas = np.empty(capacity)
+        th = target[2]
+        found, expansions, _ = self.kernel(
+            np.ascontiguousarray(distances, dtype=np.float64), 1.0 / (g / fine),
+            np.ascontiguousarray(window_cost, dtype=np.float64),
+            np.ascontiguousarray(togo, dtype=np.float64), corner[0], corner[1], float(g),
+            np.array(sorted(self.offsets, reverse=True), dtype=np.float64),
+            self._motion_curvatures, self._motion_samples,
+            np.array([start[0], start[1], start[2],
+                      math.nan if curvature is None else float(curvature), self.need,
+                      escape_from, self.escape_rate]),
+            np.array([target[0], target[1], 0.0 if th is None else th,
+                      0.0 if th is None else 1.0]),
+            self.curvatures[0], self.position_tolerance ** 2, self.heading_tolerance,
+            self.curvature_change_cost, self.step, self.bins, self.max_expansions,
+            poses, parents, kappas)
+        if found < 0:
+            return None
+        chain: list[int] = []
+        n = int(found)
+        while n >= 0:
+            chain.append(n)
+            n = int(parents[n])
+        chain.reverse()
+        return Refined([(float(poses[m, 0]), float(poses[m, 1]), float(poses[m, 2]))
+                        for m in chain], [float(kappas[m]) for m in chain[1:]],
+                       int(expansions), self.step)
 
     def _clearance(self, blocked: NDArray[np.bool_], gridsize: float,
                    window: tuple[int, int, int, int]) -> tuple[NDArray[np.float64], int]:

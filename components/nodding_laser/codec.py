@@ -29,9 +29,7 @@ from __future__ import annotations
 import array
 import binascii
 import functools
-import logging
 import math
-import os
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -43,6 +41,7 @@ import numpy.typing as npt
 
 from afa.codec import Fault, Scan, StreamDecoder
 from afa.errors import EOutOfBounds
+from afa.kernels import compiled
 
 __all__ = [
     "STX", "ACK", "NAK", "LMS_ADDRESS", "REPLY_ADDRESS_BIT", "MAX_TELEGRAM_LENGTH",
@@ -191,19 +190,11 @@ _CRC_OFFSETS = np.arange(_CRC_SPAN - 1, -1, -1, dtype=np.intp) * 256
 
 @functools.cache
 def _crc_kernel() -> Callable[[npt.NDArray[np.uint8]], int] | None:
-    """The compiled CRC loop (decision 0021), or None for the numpy form: when numba is
-    not installed or cannot compile or cache it here, or ``AFA_KERNELS=numpy`` asks for
-    the numpy forms. Loaded on the first CRC, so importing the codec stays light."""
-    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
-        return None
-    try:
-        from components.nodding_laser._crc_jit import crc_kernel
-    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
-        if not (isinstance(exc, ModuleNotFoundError) and exc.name == "numba"):
-            logging.getLogger(__name__).warning("compiled SICK CRC unavailable (%s): "
-                                                "numpy fallback", exc)
-        return None
-    return crc_kernel  # type: ignore[no-any-return]
+    """The compiled CRC loop (decision 0021), or None for the numpy form
+    (:func:`afa.kernels.compiled`). Loaded on the first CRC, so importing the codec
+    stays light."""
+    return compiled("components.nodding_laser._crc_jit",  # type: ignore[no-any-return]
+                    "crc_kernel")
 
 
 def sick_crc16(data: bytes | bytearray | memoryview) -> int:

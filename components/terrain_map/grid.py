@@ -43,15 +43,15 @@ from __future__ import annotations
 
 import bisect
 import enum
-import logging
 import math
-import os
 from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from afa.kernels import compiled
 
 __all__ = [
     "GridGeometry",
@@ -212,18 +212,8 @@ CHUNK = 32768
 
 def _load_fuse_kernel() -> Any:
     """The compiled :meth:`TerrainGrid._fuse_chunk` (decision 0014), or None for the numpy
-    form: when numba is not installed, or ``AFA_KERNELS=numpy`` asks for it."""
-    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
-        return None
-    try:
-        from components.terrain_map._jit import fuse_kernel
-    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
-        if isinstance(exc, ModuleNotFoundError) and exc.name == "numba":
-            return None  # not installed: quietly
-        logging.getLogger(__name__).warning("compiled kernel unavailable (%s): numpy "
-                                            "fallback", exc)
-        return None
-    return fuse_kernel
+    form (:func:`afa.kernels.compiled`)."""
+    return compiled("components.terrain_map._jit", "fuse_kernel")
 
 
 #: The compiled fusion in use, None when the numpy form fuses.

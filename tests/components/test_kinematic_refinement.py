@@ -137,3 +137,59 @@ def test_a_target_behind_a_closed_wall_is_not_reached():
     blocked, cost = grids(walls)
     refiner = Refiner(0.9 * K_MAX, OFFSETS, RADIUS, hazard_margin=0.5 * CELL)
     assert refiner.plan(blocked, cost, ORIGIN, CELL, (-6.0, 0.0, 0.0), (4.0, 0.0, 0.0)) is None
+
+
+def random_scene(rng: np.random.Generator) -> tuple[list[tuple[float, float, float, float]],
+                                                    tuple[float, float, float],
+                                                    tuple[float, float, float | None],
+                                                    float | None]:
+    """Random boxes (and sometimes a wall with a gate), a start clear of them, a target
+    ahead, with or without a heading and a current curvature."""
+    walls: list[tuple[float, float, float, float]] = []
+    if rng.random() < 0.5:
+        low = float(rng.uniform(-8.0, 6.0))
+        walls += walls_with_gate(low, low + float(rng.uniform(1.2, 5.0)))
+    for _ in range(int(rng.integers(0, 12))):
+        x, y = rng.uniform(-14.0, 14.0, size=2)
+        w, h = rng.uniform(0.3, 3.0, size=2)
+        walls.append((float(x), float(x + w), float(y), float(y + h)))
+    while True:
+        start = (float(rng.uniform(-12.0, -3.0)), float(rng.uniform(-10.0, 10.0)),
+                 float(rng.uniform(-math.pi, math.pi)))
+        if not overlaps(body_points(*start), walls):
+            break
+    heading = float(rng.uniform(-math.pi, math.pi)) if rng.random() < 0.5 else None
+    target = (float(rng.uniform(2.0, 10.0)), float(rng.uniform(-10.0, 10.0)), heading)
+    curvature = float(rng.uniform(-K_MAX, K_MAX)) if rng.random() < 0.7 else None
+    return walls, start, target, curvature
+
+
+@pytest.mark.skipif(Refiner(K_MAX, OFFSETS, RADIUS).kernel is None,
+                    reason="no compiled search (numba missing, or AFA_KERNELS=numpy)")
+def test_the_compiled_search_returns_the_python_loops_path_bit_for_bit():
+    rng = np.random.default_rng(2026)
+    found = missing = 0
+    for _ in range(60):
+        walls, start, target, curvature = random_scene(rng)
+        blocked, cost = grids(walls)
+        results = []
+        for compiled in (True, False):
+            refiner = Refiner(0.9 * K_MAX, OFFSETS, RADIUS, hazard_margin=0.5 * CELL,
+                              max_expansions=int(rng.integers(200, 3000)) if compiled
+                              else results[0][1])
+            if not compiled:
+                refiner.kernel = None
+            refined = refiner.plan(blocked, cost, ORIGIN, CELL, start, target,
+                                   curvature=curvature, open_cost=6.0)
+            results.append((refined, refiner.max_expansions))
+        fast, slow = results[0][0], results[1][0]
+        if slow is None:
+            missing += 1
+            assert fast is None
+            continue
+        found += 1
+        assert fast is not None
+        assert fast.poses == slow.poses  # exact floats
+        assert fast.curvatures == slow.curvatures
+        assert fast.expansions == slow.expansions
+    assert found >= 20 and missing >= 5  # both outcomes were exercised
