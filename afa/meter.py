@@ -27,11 +27,18 @@ T = TypeVar("T")
 
 
 class _Account:
-    __slots__ = ("busy", "steps")
+    __slots__ = ("busy", "steps", "longest")
 
     def __init__(self) -> None:
         self.busy = 0.0
         self.steps = 0
+        self.longest = 0.0
+
+    def add(self, seconds: float) -> None:
+        self.busy += seconds
+        self.steps += 1
+        if seconds > self.longest:
+            self.longest = seconds
 
 
 class LoopMeter:
@@ -50,10 +57,13 @@ class LoopMeter:
 
     def snapshot(self) -> dict[str, Any]:
         """``{"wall_s": seconds since creation, "accounts": {owner: {"busy_s", "steps",
-        "share"}}}`` where ``share`` is busy time over wall time."""
+        "share", "longest_s"}}}`` where ``share`` is busy time over wall time and
+        ``longest_s`` the longest single step: the longest the owner held the loop, during
+        which no other component (Obstacle Detection included) could run."""
         wall = max(1e-9, time.perf_counter() - self._started)
         return {"wall_s": wall, "accounts": {
-            name: {"busy_s": a.busy, "steps": a.steps, "share": a.busy / wall}
+            name: {"busy_s": a.busy, "steps": a.steps, "share": a.busy / wall,
+                   "longest_s": a.longest}
             for name, a in sorted(self._accounts.items())}}
 
 
@@ -72,8 +82,7 @@ class _Metered(Coroutine[Any, Any, T]):
         try:
             return self._inner.send(value)
         finally:
-            account.busy += time.perf_counter() - start
-            account.steps += 1
+            account.add(time.perf_counter() - start)
 
     def throw(self, kind: Any, value: Any = None, traceback: Any = None) -> Any:
         account = self._account
@@ -83,8 +92,7 @@ class _Metered(Coroutine[Any, Any, T]):
                 return self._inner.throw(kind)
             return self._inner.throw(kind, value, traceback)  # pragma: no cover - legacy form
         finally:
-            account.busy += time.perf_counter() - start
-            account.steps += 1
+            account.add(time.perf_counter() - start)
 
     def close(self) -> None:
         self._inner.close()

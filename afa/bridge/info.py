@@ -71,6 +71,7 @@ def components(system: Any) -> list[dict[str, Any]]:
             "failures": health.failures, "last_error": health.last_error,
             **{f"events_{k}": v for k, v in component.traffic().items()},
             "loop_share": account.get("share"), "loop_busy_s": account.get("busy_s"),
+            "loop_longest_s": account.get("longest_s"),
         })
     return rows
 

@@ -535,11 +535,14 @@ def render_top(infos: list[dict[str, Any]], shares: _Shares) -> str:
             health = "ok" if row["healthy"] else (row["detail"] or "unhealthy")
             if len(health) > 40:
                 health = health[:39] + "…"
+            longest = row.get("loop_longest_s")
             rows.append([row["name"], row["type"], row["state"], health, row["restarts"],
                          row.get("events_in", 0), row.get("events_out", 0),
-                         shares.share(info["process"], row, wall)])
+                         shares.share(info["process"], row, wall),
+                         "-" if longest is None else f"{1000 * longest:.1f} ms"])
         blocks.append("\n".join([*lines, table(
-            ["COMPONENT", "TYPE", "STATE", "HEALTH", "RESTARTS", "IN", "OUT", "LOOP"], rows)]))
+            ["COMPONENT", "TYPE", "STATE", "HEALTH", "RESTARTS", "IN", "OUT", "LOOP",
+             "LONGEST"], rows)]))
     return "\n\n".join(blocks)
 
 

@@ -203,6 +203,37 @@ def test_the_meter_reports_and_survives_failures() -> None:
     assert meter.snapshot()["accounts"]["b"]["steps"] == 1
 
 
+def test_the_meter_keeps_each_owners_longest_step() -> None:
+    """The longest step is the longest an owner held the loop: a coroutine that never
+    suspends has one step, its whole time; one that suspends between two halves of
+    work held the loop for less than its total."""
+    meter = LoopMeter()
+
+    def work() -> int:
+        return sum(k * k for k in range(20_000))
+
+    async def whole() -> None:
+        work()
+        work()
+
+    async def halves() -> None:
+        work()
+        await asyncio.sleep(0)
+        work()
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        await loop.create_task(meter.wrap(whole(), "whole"))
+        await loop.create_task(meter.wrap(halves(), "halves"))
+
+    asyncio.run(main())
+    accounts = meter.snapshot()["accounts"]
+    assert accounts["whole"]["steps"] == 1
+    assert accounts["whole"]["longest_s"] == accounts["whole"]["busy_s"] > 0
+    assert accounts["halves"]["steps"] == 2
+    assert 0 < accounts["halves"]["longest_s"] < accounts["halves"]["busy_s"]
+
+
 def test_poll_arguments_are_parsed_by_the_interface() -> None:
     spec = Counter.methods["add"]
     assert parse_arguments(spec, ["2", "3"], "Counter.add") == {"a": 2, "b": 3}
@@ -239,14 +270,15 @@ def test_top_renders_the_launcher_table() -> None:
                        "calls_served": 3, "commands_refused": 1},
             "components": [{"name": "gps", "type": "GpsSokkia", "state": "running",
                             "healthy": True, "detail": "", "restarts": 0, "events_in": 0,
-                            "events_out": 5, "loop_busy_s": 1.0}]}
+                            "events_out": 5, "loop_busy_s": 1.0,
+                            "loop_longest_s": 0.0125}]}
     from afa.tools.commands import _Shares
 
     text = render_top([info], _Shares())
     assert "Raptor/vehicle  pid 42 on h  VirtualClock t=12.5 s  memory 80.0 MB" in text
     assert "peers autonomy; events out 5" in text and "refused commands 1" in text
     assert text.splitlines()[-1].split() == ["gps", "GpsSokkia", "running", "ok", "0", "0", "5",
-                                             "10.0%"]
+                                             "10.0%", "12.5", "ms"]
 
 
 def test_an_interest_makes_an_event_subscribed_and_receives_nothing() -> None:

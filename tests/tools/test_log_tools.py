@@ -182,14 +182,14 @@ def test_top_shows_the_recorded_launcher_table(recording: Path, tool: Tool) -> N
     assert head.startswith("Raptor/main  pid ") and "VirtualClock t=3.1 s" in head
     assert "memory" in head and "components' loop share" in head
     assert columns.split() == ["COMPONENT", "TYPE", "STATE", "HEALTH", "RESTARTS", "IN", "OUT",
-                               "LOOP"]
+                               "LOOP", "LONGEST"]
     rows = table_rows(text)
     assert set(rows) == {"model", "laser", "display"}
     # the scan of the table's own instant is published after the table is taken
     published = sum(t < 3.1 - 1e-9 for t in scans)
     assert rows["laser"][:6] == ["Laser", "running", "ok", "0", "0", str(published)]
     assert rows["model"][:6] == ["Model", "running", "ok", "0", "0", "0"]
-    assert all(row[-1].endswith("%") for row in rows.values())
+    assert all(row[-3].endswith("%") and row[-1] == "ms" for row in rows.values())
     # --at: the table at or before it; refreshes step through recorded time
     earlier = tool("top", "--log", str(recording), "--at", "2.5", "--once").stdout
     assert earlier.startswith("# small.mcap at 2.100 s")

@@ -176,11 +176,12 @@ def test_top_shows_the_launcher_table(running: str, tool: Tool) -> None:
     assert traffic.strip().startswith("bridge: peers none;")
     assert "running" in text and "FindPath" not in text  # the autonomy process is not here
     assert columns.split() == ["COMPONENT", "TYPE", "STATE", "HEALTH", "RESTARTS", "IN", "OUT",
-                               "LOOP"]
+                               "LOOP", "LONGEST"]
     table = {row.split()[0]: row.split() for row in rows}
     assert table["modelServer"][1:3] == ["ModelServer", "running"]
-    assert int(table["modelServer"][-3]) > 0 and int(table["modelServer"][-2]) > 0  # in, out
-    assert table["modelServer"][-1].endswith("%")
+    assert int(table["modelServer"][-5]) > 0 and int(table["modelServer"][-4]) > 0  # in, out
+    assert table["modelServer"][-3].endswith("%")
+    assert float(table["modelServer"][-2]) > 0 and table["modelServer"][-1] == "ms"
 
 
 def test_a_closed_pipe_ends_a_tool_quietly(running: str) -> None:
