@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from components.gps_sokkia.codec import latlon_to_utm
+from components.gps_sokkia.codec import latlon_to_grid_near, latlon_to_utm
 from components.terrain_map.grid import GridGeometry
 from components.traversability_map.quality import GroundTruth, MapQuality, assess
 
@@ -83,11 +83,14 @@ class MapFrame:
         """For a world ``origin`` (``to_geodetic(east, north)``, ``elevation``) and a
         map's ``initialUTM``."""
         utm0 = np.asarray(initial_utm, dtype=np.float64)
-        zone = latlon_to_utm(*origin.to_geodetic(0.0, 0.0)).zone_number
+        # the map's grid: the one in which the world's origin lies nearest initialUTM
+        latitude0, longitude0 = origin.to_geodetic(0.0, 0.0)
+        near = latlon_to_grid_near(latitude0, longitude0, utm0[0], utm0[1])
 
         def grid(east: float, north: float) -> FloatArray:
             latitude, longitude = origin.to_geodetic(east, north)
-            fix = latlon_to_utm(latitude, longitude, zone=zone)
+            fix = latlon_to_utm(latitude, longitude, zone=near.zone_number,
+                                hemisphere=near.hemisphere)
             return np.array([fix.easting_m, fix.northing_m])
 
         step = 100.0

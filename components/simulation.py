@@ -55,7 +55,7 @@ from afa.sim.vehicle import Vehicle, VehicleState
 from afa.sim.world import World, load_world
 from afa.tasks import spawn
 from afa.transport import AsyncioByteStream, DeviceFactory, PtyDeviceStream, open_tcp
-from components.gps_sokkia.codec import latlon_to_utm
+from components.gps_sokkia.codec import latlon_to_grid_near, latlon_to_utm
 from components.map_quality import map_summary
 from components.model_server.geometry import GeometryModel
 from components.waypoints import to_local
@@ -322,6 +322,7 @@ class RaptorSimulation:
         self._pose_errors = RunningError()  # constant memory however long the run
         self._last_pose_error: tuple[float, float] | None = None  # for displays
         self._waypoints_utm: list[list[float]] | None = None
+        self._grid: tuple[int, str] | None = None  # the pose frame's UTM zone, hemisphere
         self._digests: dict[str, Any] = {}  # per event name: one stream's digest
         self.fakes: list[Any] = []
         self.endpoints: dict[str, str] = {}  # component -> pty path or host:port
@@ -721,21 +722,29 @@ class RaptorSimulation:
         if sign:
             self._steering_sign = sign
 
-    def _truth_utm(self) -> tuple[float, float, float, int]:
+    def _truth_utm(self) -> tuple[float, float, float, int, str]:
         """The vehicle reference point's true UTM easting, northing, grid yaw (rad,
-        counter-clockwise from grid east) and zone."""
+        counter-clockwise from grid east), zone and hemisphere: in the pose frame's grid
+        once a pose has come (the first GPS fix's, kept across a zone boundary or the
+        equator), in the vehicle's own grid before."""
         state = self.state
         lat, lon = self.world.origin.to_geodetic(state.east, state.north)
-        utm = latlon_to_utm(lat, lon)
+        zone, hemisphere = self._grid if self._grid is not None else (None, None)
+        utm = latlon_to_utm(lat, lon, zone=zone, hemisphere=hemisphere)
         ahead = self.world.origin.to_geodetic(state.east + 10 * math.cos(state.yaw),
                                               state.north + 10 * math.sin(state.yaw))
-        utm_ahead = latlon_to_utm(*ahead, zone=utm.zone_number)
+        utm_ahead = latlon_to_utm(*ahead, zone=utm.zone_number, hemisphere=utm.hemisphere)
         grid_yaw = math.atan2(utm_ahead.northing_m - utm.northing_m,
                               utm_ahead.easting_m - utm.easting_m)
-        return utm.easting_m, utm.northing_m, grid_yaw, utm.zone_number
+        return utm.easting_m, utm.northing_m, grid_yaw, utm.zone_number, utm.hemisphere
 
     def _pose_error(self, pose: PoseTransformIDL) -> None:
-        easting, northing, grid_yaw, _ = self._truth_utm()
+        if self._grid is None:
+            lat, lon = self.world.origin.to_geodetic(self.state.east, self.state.north)
+            near = latlon_to_grid_near(lat, lon, float(pose.initialUTM[0]),
+                                       float(pose.initialUTM[1]))
+            self._grid = (near.zone_number, near.hemisphere)
+        easting, northing, grid_yaw, _, _ = self._truth_utm()
         east = pose.HTransform[0, 3] + pose.initialUTM[0]
         north = pose.HTransform[1, 3] + pose.initialUTM[1]
         yaw = math.atan2(pose.HTransform[1, 0], pose.HTransform[0, 0])
@@ -749,11 +758,12 @@ class RaptorSimulation:
         overlay): the vehicle reference point's true UTM position and grid heading, the
         latest pose error (``None`` before the first Pose), the mission's waypoints in UTM
         and how many were reached, the collisions so far."""
-        easting, northing, grid_yaw, zone = self._truth_utm()
+        easting, northing, grid_yaw, zone, hemisphere = self._truth_utm()
         if self._waypoints_utm is None:
             self._waypoints_utm = []
             for waypoint in self.world.mission.waypoints:
-                utm = latlon_to_utm(waypoint.latitude, waypoint.longitude, zone=zone)
+                utm = latlon_to_utm(waypoint.latitude, waypoint.longitude, zone=zone,
+                                    hemisphere=hemisphere)
                 self._waypoints_utm.append([utm.easting_m, utm.northing_m])
         error = self._last_pose_error
         return {"world": self.world.name, "sim_time": self.sim_time,

@@ -1448,6 +1448,42 @@ class UtmCoordinate:
     northing_m: float
 
 
+def latlon_to_grid_near(latitude_deg: float, longitude_deg: float, easting_m: float,
+                        northing_m: float) -> UtmCoordinate:
+    """The UTM coordinates of a point in the grid (zone and hemisphere) where it lies
+    nearest the position (``easting_m``, ``northing_m``) of another grid: the grid of a
+    local frame whose origin is that position, when the point is across a zone boundary
+    or the equator from it. Zones side by side are 6° apart and the two conventions of
+    northing 10,000 km, so for points within a few hundred kilometres of the origin the
+    nearest candidate (the point's own zone or a neighbour, either convention) is the
+    origin's grid."""
+    own = latlon_to_utm(latitude_deg, longitude_deg)
+    best, best_distance = own, math.inf
+    for zone in (own.zone_number, own.zone_number % 60 + 1, (own.zone_number - 2) % 60 + 1):
+        for hemisphere in ("N", "S"):
+            candidate = latlon_to_utm(latitude_deg, longitude_deg, zone=zone,
+                                      hemisphere=hemisphere)
+            distance = math.hypot(candidate.easting_m - easting_m,
+                                  candidate.northing_m - northing_m)
+            if distance < best_distance:
+                best, best_distance = candidate, distance
+    return best
+
+
+def grid_convergence(latitude_deg: float, longitude_deg: float, zone: int,
+                     hemisphere: str = "N") -> float:
+    """The angle (rad, counter-clockwise) from true east to the grid's east at a point of
+    a UTM grid: a direction at ENU yaw θ from true east lies at θ + this from grid east
+    (about (λ − λ0)·sin φ: 0.14° at the Raptor's range, 2° at a zone's edge at 45°
+    latitude). Measured along the parallel through the point, 1e-5° of longitude long."""
+    step = 1e-5 if longitude_deg + 1e-5 <= 180.0 else -1e-5  # westward at the antimeridian
+    here = latlon_to_utm(latitude_deg, longitude_deg, zone=zone, hemisphere=hemisphere)
+    other = latlon_to_utm(latitude_deg, longitude_deg + step, zone=zone, hemisphere=hemisphere)
+    sign = 1.0 if step > 0 else -1.0
+    return math.atan2(sign * (other.northing_m - here.northing_m),
+                      sign * (other.easting_m - here.easting_m))
+
+
 def _utm_zone(lat: float, lon: float) -> int:
     zone = int((lon + 180.0) // 6.0) + 1
     if zone > 60:  # lon == 180 belongs to zone 60
@@ -1467,10 +1503,13 @@ def _utm_zone(lat: float, lon: float) -> int:
 
 
 def latlon_to_utm(latitude_deg: float, longitude_deg: float,
-                  zone: int | None = None) -> UtmCoordinate:
+                  zone: int | None = None, hemisphere: str | None = None) -> UtmCoordinate:
     """WGS-84 latitude/longitude to UTM (Krüger series to third order in n: about a
     millimetre within a zone). ``zone`` forces a zone (to stay in one grid across a
     boundary); by default the standard zone, with the Norway and Svalbard exceptions.
+    ``hemisphere`` (``"N"``/``"S"``) forces the northing's convention (to stay in one
+    grid across the equator: a point south of it has a negative northing in ``"N"``);
+    by default the point's own.
 
     Raises ValueError outside the UTM latitude limits (80 S to 84 N), for a longitude
     outside [-180, 180], or for a zone outside 1..60.
@@ -1505,7 +1544,10 @@ def latlon_to_utm(latitude_deg: float, longitude_deg: float,
         eta += a_j * math.cos(2 * j * xi_p) * math.sinh(2 * j * eta_p)
     easting = _UTM_FALSE_EASTING + _UTM_K0 * rect_a * eta
     northing = _UTM_K0 * rect_a * xi
-    hemisphere = "N" if lat >= 0 else "S"
+    if hemisphere is None:
+        hemisphere = "N" if lat >= 0 else "S"
+    elif hemisphere not in ("N", "S"):
+        raise ValueError(f"hemisphere {hemisphere!r} is neither 'N' nor 'S'")
     if hemisphere == "S":
         northing += _UTM_FALSE_NORTHING_SOUTH
     band = _BANDS[min(int((lat + 80.0) // 8.0), len(_BANDS) - 1)]

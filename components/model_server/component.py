@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from afa import ComponentError, EOutOfBounds, Event, SubscribePublishServer
+from components.gps_sokkia.codec import grid_convergence, latlon_to_utm
 from components.model_server.geometry import GeometryModel
 from components.model_server.parameters import ModelServerParameters
 from components.model_server.pose_filter import (
@@ -59,6 +60,11 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
         super().__init__(name, parameters)
         self.model: GeometryModel | None = None
         self.initial_utm: np.ndarray | None = None
+        self._grid: tuple[int, str] = (0, "N")  # UTM zone and hemisphere of initial_utm
+        self.gps_regridded = 0  # fixes moved into that grid from the receiver's next one
+        #: the grid's rotation from true east and north here (rad, counter-clockwise):
+        #: true ENU yaw + convergence = the pose frame's yaw (0 before the first fix)
+        self.convergence = 0.0
         self.inputs = {"gps": 0, "imu": 0, "odometry": 0}
         self.poses_published = 0
         # replaced in setup by the configured filter; an empty one until then
@@ -131,22 +137,39 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
 
     def _on_gps(self, t: float, gps: GpsIDL) -> None:
         self.inputs["gps"] += 1
+        easting, northing = gps.easting, gps.northing
+        grid = (gps.utmZone, "N" if gps.latitude >= 0 else "S")
         if self.initial_utm is None:
-            self.initial_utm = np.array([gps.easting, gps.northing, gps.elevation])
-        track = math.radians(gps.track)
+            self.initial_utm = np.array([easting, northing, gps.elevation])
+            self._grid = grid
+        elif grid != self._grid and self._grid[0]:
+            # across a zone boundary or the equator the receiver changes grid; the pose
+            # frame keeps the first fix's (its origin is in it), hundreds of km away
+            try:
+                utm = latlon_to_utm(gps.latitude, gps.longitude, zone=self._grid[0],
+                                    hemisphere=self._grid[1])
+            except ValueError:  # beyond the UTM latitudes: no position in this frame
+                return
+            easting, northing = utm.easting_m, utm.northing_m
+            self.gps_regridded += 1
+        if self._grid[0]:
+            self.convergence = grid_convergence(gps.latitude, gps.longitude, *self._grid)
+        # the receiver's track is from true north; the pose frame's yaw from grid east
+        track = math.radians(gps.track) - self.convergence
         if isinstance(self.filter, RawPose):
-            self.filter.update_gps(t, gps.easting, gps.northing, speed=gps.horizontalSpeed,
+            self.filter.update_gps(t, easting, northing, speed=gps.horizontalSpeed,
                                    track=track, elevation=gps.elevation)
         else:
             std = max(0.05, math.hypot(gps.latitudeStd, gps.longitudeStd) / math.sqrt(2))
-            self.filter.update_gps(t, gps.easting, gps.northing, std, speed=gps.horizontalSpeed,
+            self.filter.update_gps(t, easting, northing, std, speed=gps.horizontalSpeed,
                                    track=track, elevation=gps.elevation)
 
     def _on_imu(self, t: float, imu: ImuIDL) -> None:
         self.inputs["imu"] += 1
         roll, pitch, yaw = enu_attitude_from_ned(imu.roll, imu.pitch, imu.yaw)
         if isinstance(self.filter, RawPose):
-            self.filter.update_imu(t, yaw=yaw, roll=roll, pitch=pitch)
+            # the IMU's yaw is from true north; the pose frame's from the grid's axes
+            self.filter.update_imu(t, yaw=yaw + self.convergence, roll=roll, pitch=pitch)
             return
         rates = self._imu_rotation @ np.array([imu.rateX, imu.rateY, imu.rateZ])
         self.filter.update_imu(t, float(rates[2]), roll=roll, pitch=pitch)
@@ -185,6 +208,7 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
     def statistics(self) -> dict[str, Any]:
         stats = super().statistics()
         stats.update({f"{k}_events": v for k, v in self.inputs.items()})
+        stats["gps_regridded"] = self.gps_regridded
         stats["poses_published"] = self.poses_published
         if isinstance(self.filter, PoseFilter):
             stats["gps_rejections"] = self.filter.gps_rejections

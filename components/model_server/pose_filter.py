@@ -13,7 +13,9 @@ and no framework imports; the ModelServer component feeds it events and publishe
 
 Conventions (docs/geometry.md, ROS REP 103)
 -------------------------------------------
-- World frame: east, north, up (ENU), metres, the UTM grid (easting, northing).
+- World frame: east, north, up (ENU), metres, the UTM grid (easting, northing) of the
+  first fix, kept for the whole run; the ModelServer component turns the IMU's and the
+  receiver's true headings into it by the grid convergence (decision 0029).
 - Vehicle frame: the reference ``Raptor:RearAxleCenter``; x forward, y left, z up.
 - ``heading`` / ``yaw``: ENU yaw, radians, counter-clockwise from **east**, wrapped to
   [-pi, pi). Compass headings (GPS track over ground, clockwise from **north**) convert
