@@ -45,7 +45,7 @@ from afa.clock import TIME_TOLERANCE
 from afa.errors import AfaError
 from components.arc_arbiter.arbitrate import ArbiterDecision, VoteArbiter
 from components.arc_arbiter.parameters import ArcArbiterParameters
-from components.arc_arbiter.recovery import reverse_candidates, reverse_clearance
+from components.arc_arbiter.recovery import rear_axle, reverse_candidates, reverse_clearance
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcSetMismatchError, arc_set_of
 from idl import ArcDecisionIDL, ArcVoteIDL, TimeIDL, VehicleControl, VelocityIDL
 from idl.maps import TravMapArrayEventIDL
@@ -70,6 +70,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         if p.RecoverAfter > 0:
             self.subscribes(p.TraverseEventName, TravMapArrayEventIDL, self._on_map, maxsize=2)
         self._map: TravMapArrayEventIDL | None = None
+        self._apron: tuple[float, float, float, float, float, float] | None = None
         self._vetoed_since: float | None = None  # every arc vetoed since then
         self._backing: tuple[int, float] | None = None  # arc index, reverse until
         self.control = self.uses(VehicleControl, p.VehicleControlName)
@@ -95,6 +96,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._wake = asyncio.Event()
         self._busy = False
         self._map = None
+        self._apron = None
         self._vetoed_since = self._backing = None
 
     async def run(self) -> None:
@@ -121,6 +123,16 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
 
     def _on_map(self, event: Event) -> None:
         self._map = event.body  # type: ignore[assignment]
+        p = self.parameters
+        if self._apron is None and p.StartApron > 0:
+            try:
+                x, y, heading = rear_axle(self._map, p.MapFrameOffset)
+            except (ValueError, TypeError, AttributeError):  # a map without a vehicle pose
+                pass
+            else:
+                # the body's discs and a disc's radius beyond them, on every side
+                self._apron = (x, y, heading, p.StartApron, max(p.DiscOffsets, default=0.0)
+                               + 2.0 * p.VehicleRadius, 2.0 * p.VehicleRadius)
         if self._backing is not None and not self._reverse_clear(
                 self._backing[0], (self._backing[1] - self.clock.monotonic())
                 * self.parameters.RecoverSpeed):
@@ -137,7 +149,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         try:
             return reverse_clearance(self._map, float(self.arcs.curvatures[index]), distance,
                                      radius=p.VehicleRadius, offsets=p.DiscOffsets,
-                                     map_offset=p.MapFrameOffset)
+                                     map_offset=p.MapFrameOffset, apron=self._apron)
         except (ValueError, TypeError):  # a map without the layers it should hold
             return False
 

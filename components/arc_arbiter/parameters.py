@@ -78,6 +78,12 @@ class ArcArbiterParameters(Parameters):
         (0.0, 0.8, 1.6, 2.4), unit="m",
         description="afa addition: where along the body (m ahead of the rear axle) the "
                     "back-out's discs ride (Obstacle Avoidance's DiscOffsets)")
+    StartApron: Annotated[float, Field(ge=0, le=20)] = param(
+        4.0, unit="m",
+        description="afa addition: a back-out may cross unmapped ground this far behind "
+                    "the rear axle where the arbiter first saw the vehicle on a map (2 "
+                    "VehicleRadius either side of its centre line): the vehicle was put there "
+                    "(components/arc_arbiter/recovery.py); 0: only mapped ground")
     MapFrameOffset: float = param(
         2.45, unit="m",
         description="afa addition: how far ahead of the rear axle the Traversability "

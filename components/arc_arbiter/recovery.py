@@ -19,6 +19,14 @@ world. A cell the body already overlaps (the vehicle stands there and has not co
 a map cell is coarser than the body) blocks only if the sweep brings it closer still.
 Candidates are tried from the steering
 that turns most towards the preferred arc; when none is clear the vehicle keeps standing.
+
+One exception to "unknown blocks": the *start apron*, a rectangle behind the vehicle where
+the arbiter first saw it on a map (``StartApron`` metres long, two disc radii either side
+of the centre line). The
+vehicle was put there; a vehicle put down facing an obstacle closer than it can turn
+(Obstacle Detection halts it at once) has driven over nothing yet, and without the apron
+it would stand there for ever. Unknown cells in the apron count as ground; hazards there
+still block, and so does everything unknown outside it.
 """
 
 from __future__ import annotations
@@ -31,7 +39,7 @@ from numpy.typing import NDArray
 
 from components.arcs import arc_points
 
-__all__ = ["reverse_clearance", "reverse_candidates"]
+__all__ = ["rear_axle", "reverse_clearance", "reverse_candidates"]
 
 #: Arc-length step (m) of the reverse sweep.
 SWEEP_STEP = 0.1
@@ -46,22 +54,41 @@ def reverse_candidates(curvatures: NDArray[np.float64], preferred: float) -> lis
     return order
 
 
+def rear_axle(trav: Any, map_offset: float) -> tuple[float, float, float]:
+    """The rear axle's (x, y, heading) on ``trav``, whose ``vehiclePosition`` lies
+    ``map_offset`` metres ahead of it."""
+    heading = float(trav.vehicleHeading)
+    return (float(trav.vehiclePosition.x) - map_offset * math.cos(heading),
+            float(trav.vehiclePosition.y) - map_offset * math.sin(heading), heading)
+
+
 def reverse_clearance(trav: Any, curvature: float, distance: float, *, radius: float,
                       offsets: tuple[float, ...], map_offset: float,
-                      threshold: float = 1.0) -> bool:
+                      threshold: float = 1.0,
+                      apron: tuple[float, float, float, float, float, float] | None = None
+                      ) -> bool:
     """True when reversing ``distance`` metres along ``curvature`` is clear on ``trav``
     (a TravMapArrayEventIDL: world frame, rows along x (east), columns along y (north)),
-    whose ``vehiclePosition`` lies ``map_offset`` metres ahead of the rear axle."""
+    whose ``vehiclePosition`` lies ``map_offset`` metres ahead of the rear axle.
+    ``apron``: (x, y, heading, behind, ahead, half width) of the start apron (module
+    docstring), a rectangle from ``behind`` metres behind (x, y) to ``ahead`` metres
+    ahead of it along ``heading``, whose unknown cells count as ground."""
     hazard = np.asarray(trav.hazard, dtype=np.float64)
+    g = float(trav.gridsize)
     with np.errstate(invalid="ignore"):
-        blocked = np.argwhere((hazard >= threshold) | np.isnan(hazard))  # unknown too
+        unknown = np.isnan(hazard)
+        if apron is not None:
+            ax, ay, ah, behind, ahead, half = apron
+            cx = float(trav.originX) + (np.arange(hazard.shape[0])[:, None] + 0.5) * g - ax
+            cy = float(trav.originY) + (np.arange(hazard.shape[1])[None, :] + 0.5) * g - ay
+            along = cx * math.cos(ah) + cy * math.sin(ah)
+            across = -cx * math.sin(ah) + cy * math.cos(ah)
+            unknown &= ~((along >= -behind) & (along <= ahead) & (np.abs(across) <= half))
+        blocked = np.argwhere((hazard >= threshold) | unknown)
     if len(blocked) == 0:
         return True
-    g = float(trav.gridsize)
-    heading = float(trav.vehicleHeading)
+    rear_x, rear_y, heading = rear_axle(trav, map_offset)
     c, s = math.cos(heading), math.sin(heading)
-    rear_x = float(trav.vehiclePosition.x) - map_offset * c
-    rear_y = float(trav.vehiclePosition.y) - map_offset * s
     steps = max(1, math.ceil(distance / SWEEP_STEP - 1e-9))
     travel = -np.linspace(0.0, distance, steps + 1)
     xs, ys = [], []

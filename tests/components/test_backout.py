@@ -109,6 +109,34 @@ def test_candidates_start_from_the_mirror_of_the_preferred_arc():
 BACKOUT = ArcArbiterParameters(RecoverAfter=3.0, RecoverDistance=1.5, RecoverSpeed=0.3)
 
 
+def placed(m: TravMapArrayEventIDL) -> TravMapArrayEventIDL:
+    """``m`` as a vehicle just put down sees it: nothing mapped behind the rear axle."""
+    hazard = np.array(m.hazard)
+    hazard[:32, :] = np.nan  # cells behind x = 0 never seen
+    return m.model_copy(update={"hazard": hazard})
+
+
+def test_the_start_apron_lets_a_vehicle_just_put_down_back_out():
+    # the apron: 4 m behind the rear axle to 3.8 m ahead, 1.4 m either side
+    apron = (0.0, 0.0, 0.0, 4.0, 3.8, 1.4)
+    m = placed(trav([]))
+    assert not clear(m, 0.0, 2.5)  # without it, the unseen ground blocks
+    assert reverse_clearance(m, 0.0, 2.5, radius=0.7, offsets=(0.0, 0.8, 1.6, 2.4),
+                             map_offset=BUMPER, apron=apron)
+    # a hazard in the apron still blocks, and so does unseen ground beyond it: 3.2 m of
+    # reverse takes the rear disc to 3.9 m behind, within a cell of the apron's end
+    hazard = np.array(m.hazard)
+    hazard[27, 31:33] = 1.0  # the cells centred 2.25 m behind the axle, 0.25 m either side
+    rock = m.model_copy(update={"hazard": hazard})
+    assert not reverse_clearance(rock, 0.0, 2.5, radius=0.7, offsets=(0.0, 0.8, 1.6, 2.4),
+                                 map_offset=BUMPER, apron=apron)
+    assert not reverse_clearance(m, 0.0, 3.4, radius=0.7, offsets=(0.0, 0.8, 1.6, 2.4),
+                                 map_offset=BUMPER, apron=apron)
+    # an apron elsewhere (where the vehicle was put down, 10 m away) does not help
+    assert not reverse_clearance(m, 0.0, 2.5, radius=0.7, offsets=(0.0, 0.8, 1.6, 2.4),
+                                 map_offset=BUMPER, apron=(10.0, 0.0, 0.0, 4.0, 3.8, 1.4))
+
+
 def reverses(r, after: float = -math.inf) -> list:
     return [c for c in wire_commands(r.fake, SetVelocity, after)
             if c.command.translation_mm_s < 0]
@@ -171,6 +199,23 @@ async def test_a_stale_vote_ends_a_back_out_at_once():
         assert back and back[-1].time < 6.8 + 0.1
         stale = ArcArbiterParameters().stale_vote_time
         assert stops_after(r.fake, 5.2 + stale)
+
+
+@pytest.mark.parametrize("apron", [4.0, 0.0])
+async def test_a_vehicle_put_down_facing_a_wall_backs_out_over_its_start_apron(apron):
+    # the first map: nothing seen behind the vehicle (it has not moved); every arc vetoed
+    # (Obstacle Detection halts it in front of the wall)
+    async with rig(cruise=False, parameters=BACKOUT.model_copy(
+            update={"StartApron": apron})) as r:
+        r.system.channel.publish("Raptor", "Traverse", placed(trav([(3.0, 3.5, -9.0, 9.0)])),
+                                 origin="test")
+        veto_all_until(r, 2.0, 10.0)
+        await r.until(10.0)
+        if apron:
+            assert reverses(r), "no back-out over the start apron"
+        else:
+            assert reverses(r) == []  # StartApron 0: only mapped ground, as before
+            assert r.arbiter.statistics()["backouts"] == 0
 
 
 @pytest.mark.parametrize("recover_after", [0.0])
