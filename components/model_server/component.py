@@ -153,7 +153,10 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
             easting, northing = utm.easting_m, utm.northing_m
             self.gps_regridded += 1
         if self._grid[0]:
-            self.convergence = grid_convergence(gps.latitude, gps.longitude, *self._grid)
+            try:
+                self.convergence = grid_convergence(gps.latitude, gps.longitude, *self._grid)
+            except ValueError:  # beyond the UTM latitudes: keep the last one
+                pass
         # the receiver's track is from true north; the pose frame's yaw from grid east
         track = math.radians(gps.track) - self.convergence
         if isinstance(self.filter, RawPose):
