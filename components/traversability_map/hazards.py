@@ -13,9 +13,16 @@ tests):
    newest fine time, and the count-weighted *centroid* of the fine cell centres. The
    centroid is where the mean elevation actually sits; the slope fit uses it, so the
    uneven 2-or-3 grouping does not bias slopes (up to 10 % at 0.2/0.5 otherwise).
-2. **Step hazard** of a known cell: ``step = max(max - min, max over known 8-neighbours
-   (elevation - elevation_n), 0)``. The within-cell spread catches a wall inside the
-   cell; neighbour differences use mean elevations (not max - min across cells,
+2. **Step hazard** of a known cell: ``step = max(spread, max over known 8-neighbours
+   (elevation - elevation_n), 0)`` where ``spread = max - min - rise``, ``rise`` being
+   what the cell's fitted plane (rule 3, at most as steep as the slope limit) climbs
+   across the extent of its points (``|g_x|·span_x + |g_y|·span_y``): a 15° ramp
+   spreads a cell's points over up to 0.23 m (0.85 m across a diagonal), and a few
+   centimetres of relief on top made every other cell of a legal slope a step (the
+   2-or-3 grouping alternates the span). Only a neighbourhood that *is* a plane (RMS
+   residual under a tenth of a step) lends its gradient: next to a rock the fit tilts
+   and the cell keeps its whole spread. The within-cell spread catches a wall inside
+   the cell; neighbour differences use mean elevations (not max - min across cells,
    which would read a traversable 19° ramp as a 0.3 m step over a diagonal). The
    *higher* side of a step between cells is marked (a rock's or a trunk's own cells, a
    ledge's or a ditch's lip); the *lower* side only when it lies a step below the
@@ -253,7 +260,8 @@ class CoarseCells:
     where ``count`` is 0; ``last_seen`` NaN where unknown; ``offset_x``/``offset_y``
     are the centroid's offset (m) from the cell's nominal centre (0 where unknown);
     ``fine_known``/``fine_total`` count the fine cells with points / all fine cells
-    assigned to each coarse cell.
+    assigned to each coarse cell; ``span_x``/``span_y`` (m) are the extent of its fine
+    cells with points along x and y (0 where none): how far apart its points can lie.
     """
 
     geometry: GridGeometry
@@ -266,6 +274,8 @@ class CoarseCells:
     offset_y: FloatArray
     fine_known: NDArray[np.int64]
     fine_total: NDArray[np.int64]
+    span_x: FloatArray
+    span_y: FloatArray
 
 
 class _Resampler:
@@ -284,6 +294,7 @@ class _Resampler:
         self.dx = x.ravel()[inside] - cx
         self.dy = y.ravel()[inside] - cy
         self.coarse = coarse
+        self.fine_size = fine.gridsize
         self.fine_total = np.bincount(self.coarse_index, minlength=coarse.size)
 
     def __call__(self, terrain: TerrainLayers) -> CoarseCells:
@@ -311,6 +322,14 @@ class _Resampler:
         if terrain.last_seen is not None:
             fine_seen = terrain.last_seen.ravel().take(self.fine_index)[known]
             np.maximum.at(seen, idx, np.where(np.isnan(fine_seen), -np.inf, fine_seen))
+        spans = []
+        for offsets in (self.dx[known], self.dy[known]):
+            least = np.full(n, np.inf)
+            np.minimum.at(least, idx, offsets)
+            most = np.full(n, -np.inf)
+            np.maximum.at(most, idx, offsets)
+            with np.errstate(invalid="ignore"):
+                spans.append(np.where(np.isfinite(least), most - least + self.fine_size, 0.0))
         points = total.astype(np.int64)
         empty = points == 0
         for array in (elevation, low, high):
@@ -323,7 +342,8 @@ class _Resampler:
                            low.reshape(shape), high.reshape(shape), seen.reshape(shape),
                            offset_x.reshape(shape), offset_y.reshape(shape),
                            np.bincount(idx, minlength=n).reshape(shape),
-                           self.fine_total.reshape(shape))
+                           self.fine_total.reshape(shape), spans[0].reshape(shape),
+                           spans[1].reshape(shape))
 
 
 def resample(terrain: TerrainLayers, coarse: GridGeometry) -> CoarseCells:
@@ -381,6 +401,12 @@ def _line(padded: NDArray[Any], pad: int, di: int, dj: int, reach: int,
     return view
 
 
+#: A neighbourhood is a plane (its gradient explains a cell's spread) when its cells'
+#: RMS residual from the fit is under this fraction of a step (3 cm at 0.3 m): ground
+#: relief fits that well, the edge of a rock partly in a cell does not (at a sixth, 5 cm,
+#: the rock field's scripted drive lost 3 of its 56 rock cells).
+PLANAR_RESIDUAL = 0.1
+
 #: The eight neighbours and the 3x3 neighbourhood, as (di, dj) offsets.
 NEIGHBOURS = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj]
 NEIGHBOURHOOD = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1)]
@@ -411,6 +437,19 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
 
     reach = math.ceil(rules.hole_reach / g - 1e-9)  # cells of hole_reach (module doc, 5)
 
+    # --- slope (first: the step rule takes the ground's own rise out of a cell's spread)
+    slope, gradient_x, gradient_y = _plane_slopes(elev, cells.offset_x, cells.offset_y, g,
+                                                  known, threshold)
+    with np.errstate(invalid="ignore"):
+        slope_hazard = np.minimum(slope / limit, 1.0)
+        slope_full = slope >= limit
+    # the rise of the fitted plane across a cell's points, at most a legal slope's
+    with np.errstate(invalid="ignore", divide="ignore"):
+        steepness = np.hypot(gradient_x, gradient_y)
+        legal = np.where(steepness > tan_limit, tan_limit / steepness, 1.0)
+        rise = np.nan_to_num(legal * (np.abs(gradient_x) * cells.span_x
+                                      + np.abs(gradient_y) * cells.span_y))
+
     # --- step: only the higher side of a step is marked (see the module doc)
     around = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURS, (rows, cols))
     differences = elev - around
@@ -419,8 +458,9 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     lower = np.maximum(-differences.min(axis=0), 0.0)  # a step below a neighbour
     with np.errstate(invalid="ignore"):
         in_pit = _below_surroundings(known & (lower >= threshold), elev, threshold, 2 * reach)
-    step = np.where(known, np.maximum(high - low, np.where(in_pit, np.maximum(upper, lower),
-                                                           upper)), np.nan)
+    spread = np.maximum(high - low - rise, 0.0)  # what the ground's slope does not explain
+    step = np.where(known, np.maximum(spread, np.where(in_pit, np.maximum(upper, lower),
+                                                       upper)), np.nan)
     with np.errstate(invalid="ignore"):
         step_full = known & (step >= threshold)
     if reach >= 1:  # the top of a low, wide obstacle: no lower neighbour in view
@@ -431,12 +471,6 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
         step_hazard = np.minimum(step / threshold, 1.0)
     else:
         step_hazard = np.where(step_full, 1.0, 0.0)
-
-    # --- slope
-    slope = _plane_slopes(elev, cells.offset_x, cells.offset_y, g, known, threshold)
-    with np.errstate(invalid="ignore"):
-        slope_hazard = np.minimum(slope / limit, 1.0)
-        slope_full = slope >= limit
 
     # --- negative obstacles
     goodness = _goodness(cells, rules, known, far, now)
@@ -492,10 +526,12 @@ def _goodness(cells: CoarseCells, rules: HazardRules, known: NDArray[np.bool_],
 
 
 def _plane_slopes(elev: FloatArray, offset_x: FloatArray, offset_y: FloatArray, g: float,
-                  known: NDArray[np.bool_], step: FloatArray) -> FloatArray:
+                  known: NDArray[np.bool_], step: FloatArray
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Slope angle (deg) of the least-squares plane through the known cells of each
-    known cell's 3x3 neighbourhood that lie less than a ``step`` above or below it;
-    NaN where unknown or degenerate."""
+    known cell's 3x3 neighbourhood that lie less than a ``step`` above or below it (NaN
+    where unknown or degenerate), and the plane's gradient along x and y (m/m) where
+    the cells fit it within :data:`PLANAR_RESIDUAL` of a step RMS (NaN elsewhere)."""
     shape = elev.shape
     centre = np.where(known, elev, 0.0)
     z = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURHOOD, shape) - centre  # relative
@@ -521,8 +557,13 @@ def _plane_slopes(elev: FloatArray, offset_x: FloatArray, offset_y: FloatArray, 
     a = (sxz * m00 - sxy * (syz * n - sy * sz) + sx * (syz * sy - syy * sz)) / safe
     b = (sxx * (syz * n - sz * sy) - sxz * m01 + sx * (sxy * sz - syz * sx)) / safe
     slope = np.degrees(np.arctan(np.hypot(a, b) / g))  # per cell → per metre
-    result: FloatArray = np.where(ok, slope, np.nan)
-    return result
+    c = (sz - a * sx - b * sy) / np.where(n > 0, n, 1.0)
+    residual = np.sqrt((np.where(w, z - a * x - b * y - c, 0.0) ** 2).sum(axis=0)
+                       / np.where(n > 0, n, 1.0))
+    # the gradient only where the neighbourhood is a plane (a rock's edge tilts the fit)
+    planar = ok & (residual < PLANAR_RESIDUAL * step)
+    return (np.where(ok, slope, np.nan), np.where(planar, a / g, np.nan),
+            np.where(planar, b / g, np.nan))
 
 
 def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,

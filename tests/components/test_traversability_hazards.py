@@ -69,6 +69,7 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
     rows, cols = coarse.shape
     acc: dict[tuple[int, int], list[float]] = {}
     fine_cells: dict[tuple[int, int], list[int]] = {}  # [with points, all]
+    extents: dict[tuple[int, int], list[float]] = {}  # fine centres with points: x, y range
     for fi in range(fine.rows):
         for fj in range(fine.cols):
             n = int(terrain.count[fi, fj])
@@ -83,6 +84,8 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
             if n == 0:
                 continue
             tally[0] += 1
+            box = extents.setdefault((i, j), [math.inf, -math.inf, math.inf, -math.inf])
+            box[:] = [min(box[0], x), max(box[1], x), min(box[2], y), max(box[3], y)]
             cx, cy = coarse.origin_x + (i + 0.5) * g, coarse.origin_y + (j + 0.5) * g
             a = acc.setdefault((i, j), [0, 0.0, 0.0, 0.0, math.inf, -math.inf, -math.inf])
             a[0] += n
@@ -129,6 +132,7 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
 
     good = {(i, j): goodness(i, j) for i in range(rows) for j in range(cols)}
     slopes: dict[tuple[int, int], float] = {}  # fitted slope (deg) of known cells
+    gradients: dict[tuple[int, int], tuple[float, float]] = {}  # of the fit, m/m
     for i in range(rows):
         for j in range(cols):
             if cell(i, j) is None:
@@ -144,10 +148,28 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                                        b[1] / b[0] - e))
             design = np.array([[p[0], p[1], 1.0] for p in points])
             if len(points) >= 3 and np.linalg.det(design.T @ design) >= 0.25:
-                solution = np.linalg.lstsq(design, np.array([p[2] for p in points]),
-                                           rcond=None)[0]
+                heights = np.array([p[2] for p in points])
+                solution = np.linalg.lstsq(design, heights, rcond=None)[0]
                 slopes[(i, j)] = math.degrees(math.atan(math.hypot(solution[0],
                                                                    solution[1]) / g))
+                misfit = math.sqrt(float(np.mean((design @ solution - heights) ** 2)))
+                if misfit < params(i, j)[1] * 0.1:  # a plane: its gradient lifts the spread
+                    gradients[(i, j)] = (solution[0] / g, solution[1] / g)
+
+    def within(i: int, j: int) -> float:
+        """The cell's spread less the fitted plane's rise across its points' extent
+        (the plane no steeper than the slope limit for this rise); 0 at least."""
+        a = cell(i, j)
+        assert a is not None
+        rise = 0.0
+        if (i, j) in gradients:
+            gx, gy = gradients[(i, j)]
+            limit = math.tan(math.radians(params(i, j)[2]))
+            legal = min(1.0, limit / math.hypot(gx, gy)) if math.hypot(gx, gy) > 0 else 1.0
+            x0, x1, y0, y1 = extents[(i, j)]
+            rise = legal * (abs(gx) * (x1 - x0 + fine.gridsize)
+                            + abs(gy) * (y1 - y0 + fine.gridsize))
+        return max(a[5] - a[4] - rise, 0.0)
 
     def line(i: int, j: int, di: int, dj: int, sign: int) -> list[tuple[float, list[float]]]:
         """(distance, cell) of the known cells on one side, nearest first."""
@@ -183,7 +205,7 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
             if a is None:
                 continue
             e = elev(i, j)
-            spread = a[5] - a[4]
+            spread = within(i, j)
             for di in (-1, 0, 1):
                 for dj in (-1, 0, 1):
                     ii, jj = i + di, j + dj
@@ -291,7 +313,7 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                         neighbour = max(neighbour, e - b[1] / b[0])  # higher side
                         if b[1] / b[0] - e >= t and below_ground(i, j, t):  # in a pit
                             neighbour = max(neighbour, b[1] / b[0] - e)
-            step = max(a[5] - a[4], neighbour)
+            step = max(within(i, j), neighbour)
             if (i, j) in tops:
                 step = max(step, raised[(i, j)])
             out["step"][i, j] = step
@@ -426,6 +448,46 @@ def test_ramp_just_under_and_over_maxslope(angle: float, axis: str, expect: bool
         assert layers.hazard[near].max() == pytest.approx(angle / 20.0, abs=1e-4)
     # far field: the limit relaxes to 30 degrees
     assert not flagged(layers, FLAG_SLOPE)[~near].any()
+
+
+def relief(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Smooth ground relief of about 3 cm RMS, its own slopes under 12° (a few waves
+    1-2.3 m long), the kind the simulator's ``roughness`` makes."""
+    return (0.04 * np.sin(2.7 * x + 0.4) * np.cos(3.1 * y) + 0.02 * np.sin(4.3 * x - 3.1 * y)
+            + 0.015 * np.cos(6.1 * x + 2.0 * y + 1.0) + 0.015 * np.sin(5.1 * y - 0.7))
+
+
+@pytest.mark.parametrize("angle,axis", [(12.0, "xy"), (15.0, "x"), (15.0, "xy")])
+def test_a_rough_legal_ramp_has_no_steps(angle: float, axis: str) -> None:
+    # a cell's points span up to 0.6 m (0.85 m across a diagonal) of the ramp: on a 15°
+    # ramp that is up to 0.23 m of spread that is slope, not step; with a few
+    # centimetres of relief on top it crossed the 0.3 m step height
+    grade = math.tan(math.radians(angle))
+    along = {"x": lambda x, y: x, "xy": lambda x, y: (x + y) / math.sqrt(2)}[axis]
+    layers = check_against_reference(
+        terrain_from(lambda x, y: grade * along(x, y) + relief(x, y)), vehicle=(0.0, 0.0))
+    assert not flagged(layers, FLAG_STEP).any()
+    assert not flagged(layers, FLAG_SLOPE)[~flagged(layers, FLAG_FAR)].any()
+
+
+@pytest.mark.parametrize("height,expect", [(0.0, False), (0.45, True)])
+def test_a_rock_on_a_steep_ramp_is_still_a_step(height: float, expect: bool) -> None:
+    # a 0.6 m square rock on a rough 15° ramp: the ramp's rise is taken out of a cell's
+    # spread, the rock's own height is not
+    grade = math.tan(math.radians(15.0))
+
+    def ground(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        rock = (np.abs(x - 3.05) <= 0.3) & (np.abs(y - 0.05) <= 0.3)
+        return grade * (x + y) / math.sqrt(2) + relief(x, y) + np.where(rock, height, 0.0)
+
+    layers = check_against_reference(terrain_from(ground), vehicle=(0.0, 0.0))
+    steps = flagged(layers, FLAG_STEP)
+    assert steps.any() == expect
+    if expect:
+        rows, cols = np.nonzero(steps)
+        x = COARSE.origin_x + (rows + 0.5) * COARSE.gridsize
+        y = COARSE.origin_y + (cols + 0.5) * COARSE.gridsize
+        assert np.all(np.hypot(x - 3.05, y - 0.05) < 1.0)  # the rock's cells, nothing else
 
 
 def test_a_ditch_seen_from_afar_marks_its_unseen_middle() -> None:
