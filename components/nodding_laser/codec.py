@@ -56,6 +56,7 @@ __all__ = [
     "encode_sick_message", "encode_switch_mode", "encode_start_continuous",
     "encode_stop_continuous", "encode_request_measured_values", "encode_switch_variant",
     "encode_mode_reply", "encode_variant_reply", "encode_measured_values",
+    "encode_measured_words", "encode_scan_frame",
     "SickTelegramDecoder",
     "CONTROLLER_SYNC", "CONTROLLER_VERSION", "CONTROLLER_HEADER_SIZE",
     "CONTROLLER_MAX_PAYLOAD", "FrameType", "AckResult", "ControllerState",
@@ -596,6 +597,32 @@ def encode_variant_reply(accepted: bool, scan_angle_deg: int, resolution_cdeg: i
                                 status=status)
 
 
+def encode_measured_words(words: npt.NDArray[np.integer], *, unit: RangeUnit = RangeUnit.MM,
+                          status: int = 0x10, partial_scan_index: int = 0,
+                          address: int = LMS_ADDRESS | REPLY_ADDRESS_BIT) -> bytes:
+    """:func:`encode_measured_values` of ``MeasuredValues(tuple(words), unit, status,
+    partial_scan_index, address=address)``, the same bytes, from an integer array of
+    value words without making a tuple of them (the emulator's path, 75 scan lines a
+    simulated second).
+
+    Raises :class:`~afa.errors.EOutOfBounds` as :func:`encode_measured_values` does.
+    """
+    words = np.asarray(words).reshape(-1)
+    if words.size > 0x03FF:
+        raise EOutOfBounds(f"{words.size} values do not fit the 10-bit count")
+    if not 0 <= partial_scan_index <= 3:
+        raise EOutOfBounds("partial scan index is 0..3")
+    if words.dtype.kind not in "iu" or (
+            words.size and not (words.min() >= 0 and words.max() <= 0xFFFF)):
+        raise EOutOfBounds("measured value words are 16-bit")
+    word = words.size | (partial_scan_index << 11) | (_UNIT_CODE[unit] << 14)
+    data = _U16.pack(word) + words.astype("<u2").tobytes()
+    return encode_sick_telegram(REPLY_MEASURED_VALUES, data, address=address, status=status)
+
+
+_U16 = struct.Struct("<H")
+
+
 def encode_measured_values(values: MeasuredValues) -> bytes:
     """Reply 0xB0: count word (count, partial scan index, unit), value words, status.
 
@@ -928,6 +955,25 @@ def encode_controller_message(message: ControllerMessage) -> bytes:
     if message.reply is not None:
         payload += encode_sick_message(message.reply)
     return encode_controller_frame(FrameType.SICK_REPLY, payload, seq=message.seq)
+
+
+def encode_scan_frame(scan_counter: int, timestamp_us: int, nod_start_udeg: int,
+                      nod_end_udeg: int, words: npt.NDArray[np.integer], *, seq: int = 0,
+                      status: int = 0x10) -> bytes:
+    """Device side: the SCAN frame that :func:`encode_controller_message` makes of
+    ``NodScan(scan_counter, timestamp_us, nod_start_udeg, nod_end_udeg,
+    MeasuredValues(tuple(words), RangeUnit.MM, status), seq)``, the same bytes, from an
+    array of value words (:func:`encode_measured_words`).
+
+    Raises :class:`~afa.errors.EOutOfBounds` on out-of-range fields.
+    """
+    _check_int("scan counter", scan_counter, 0, 0xFFFFFFFF)
+    _check_int("timestamp", timestamp_us, 0, (1 << 64) - 1)
+    _check_int("nod start", nod_start_udeg, *_I32)
+    _check_int("nod end", nod_end_udeg, *_I32)
+    payload = _SCAN_PREFIX.pack(scan_counter, timestamp_us, nod_start_udeg, nod_end_udeg)
+    payload += encode_measured_words(words, status=status)
+    return encode_controller_frame(FrameType.SCAN, payload, seq=seq)
 
 
 def encode_host_command(command: HostCommand) -> bytes:

@@ -51,7 +51,6 @@ from components.nodding_laser.codec import (
     HostCommand,
     MeasuredValues,
     NodHostCommandDecoder,
-    NodScan,
     OperatingModeReply,
     RangeUnit,
     RequestMeasuredValues,
@@ -68,6 +67,7 @@ from components.nodding_laser.codec import (
     SwitchVariant,
     VariantReply,
     encode_controller_message,
+    encode_scan_frame,
     scan_bearings_deg,
 )
 from components.nodding_laser.component import SCAN_PERIODS
@@ -319,15 +319,17 @@ class FakeNodLaser(FakeDevice[HostCommand]):
             reply = VariantReply(accepted, *self.variant, 0x10)
         elif isinstance(sick, RequestMeasuredValues):
             now = self.clock.monotonic()
-            reply = self._measure(now - self.scan_period, now)[1]
+            words = self._measure(now - self.scan_period, now)[1]
+            reply = MeasuredValues(tuple(words.tolist()), RangeUnit.MM, 0x10, 0, _RANGE_BITS)
         else:
             ack = NAK  # commands this LMS model does not implement
         await self._send(stream, SickReply(ack, reply, self._next_seq()))
         return AckResult.OK
 
     def _measure(self, start: float, end: float) -> tuple[tuple[float, float],
-                                                          MeasuredValues]:
-        """Encoder angles at both ends and the LMS's 0xB0 reply for one scan."""
+                                                          npt.NDArray[np.uint16]]:
+        """Encoder angles at both ends and the value words of the LMS's 0xB0 reply for
+        one scan."""
         bearings, fraction = _beams(self.variant)
         count = bearings.size
         nod_start, nod_end = self.angle_at(start), self.angle_at(end)
@@ -339,22 +341,24 @@ class FakeNodLaser(FakeDevice[HostCommand]):
             ranges = ranges + self.rng.normal(0.0, self.noise_m, ranges.shape)
         counts = np.rint(ranges * 1000.0)  # np.round without its Python wrapper
         good = (counts >= 1) & (counts < _MAX_COUNT)  # False for NaN and inf
-        words = np.where(good, counts, NO_RETURN_WORD).astype(np.int64)
-        raw = tuple(words.tolist())
-        return (nod_start, nod_end), MeasuredValues(raw, RangeUnit.MM, 0x10, 0, _RANGE_BITS)
+        # (1 .. 8182 mm or the no-return word: all 16-bit)
+        return (nod_start, nod_end), np.where(good, counts, NO_RETURN_WORD).astype(np.uint16)
 
     async def _send_scan(self, stream: ByteStream, start: float, end: float) -> None:
-        (nod_start, nod_end), measured = self._measure(start, end)
-        scan = NodScan(self.scan_counter, max(0, round((start - self.boot) * 1e6)),
-                       round(nod_start * 1e6), round(nod_end * 1e6), measured,
-                       self._next_seq())
+        (nod_start, nod_end), words = self._measure(start, end)
+        # the bytes of encode_controller_message(NodScan(..., MeasuredValues(words))),
+        # without a tuple of 361 ints
+        frame = encode_scan_frame(self.scan_counter, max(0, round((start - self.boot) * 1e6)),
+                                  round(nod_start * 1e6), round(nod_end * 1e6), words,
+                                  seq=self._next_seq())
         self.scan_counter = (self.scan_counter + 1) & 0xFFFFFFFF
-        frame = bytearray(encode_controller_message(scan))
         if self._corrupt_pending:
             self._corrupt_pending -= 1
-            frame[len(frame) // 2] ^= 0x10
+            damaged = bytearray(frame)
+            damaged[len(damaged) // 2] ^= 0x10
+            frame = bytes(damaged)
         self.scans_sent += 1
-        await stream.write(bytes(frame))
+        await stream.write(frame)
 
     # -- controller frames ---------------------------------------------------------------------
     def _status(self) -> ControllerStatus:

@@ -50,8 +50,10 @@ from components.nodding_laser.codec import (
     encode_controller_message,
     encode_host_command,
     encode_measured_values,
+    encode_measured_words,
     encode_mode_reply,
     encode_request_measured_values,
+    encode_scan_frame,
     encode_sick_message,
     encode_sick_telegram,
     encode_start_continuous,
@@ -634,3 +636,37 @@ def test_both_crc_forms_equal_the_manuals_routine(form: str, monkeypatch) -> Non
     for data in samples:
         assert codec.sick_crc16(data) == codec.sick_crc16_reference(data)
     assert codec.sick_crc16(CAPTURED_SCAN_361[:-2]) == 0x4764
+
+
+# -- value words from an array (the emulator's path, decision 0028) ---------------------------
+
+@PROPERTY
+@given(words=st.lists(st.integers(0, 0xFFFF), max_size=0x3FF),
+       status=st.integers(0, 0xFF), counter=st.integers(0, 0xFFFFFFFF),
+       stamp=st.integers(0, (1 << 64) - 1), start=st.integers(-(1 << 31), (1 << 31) - 1),
+       end=st.integers(-(1 << 31), (1 << 31) - 1), seq=st.integers(0, 0xFF),
+       dtype=st.sampled_from([np.int64, np.uint16, np.int32, np.uint32]))
+def test_words_from_an_array_encode_as_the_tuple_does(words: list[int], status: int,
+                                                     counter: int, stamp: int, start: int,
+                                                     end: int, seq: int, dtype: type) -> None:
+    array = np.array(words, dtype=dtype)
+    values = MeasuredValues(tuple(words), RangeUnit.MM, status)
+    assert encode_measured_words(array, status=status) == encode_measured_values(values)
+    scan = NodScan(counter, stamp, start, end, values, seq)
+    assert encode_scan_frame(counter, stamp, start, end, array, seq=seq, status=status) \
+        == encode_controller_message(scan)
+
+
+def test_words_from_an_array_are_refused_as_the_tuple_is() -> None:
+    for words in ([0x10000], [-1], [5, 0x1FFFF]):
+        with pytest.raises(EOutOfBounds):
+            encode_measured_values(MeasuredValues(tuple(words)))
+        with pytest.raises(EOutOfBounds):
+            encode_measured_words(np.array(words, dtype=np.int64))
+    with pytest.raises(EOutOfBounds):
+        encode_measured_words(np.zeros(0x400, dtype=np.uint16))
+    with pytest.raises(EOutOfBounds):  # not integers
+        encode_measured_words(np.array([1.5, 2.0]))
+    with pytest.raises(EOutOfBounds):
+        encode_scan_frame(1 << 32, 0, 0, 0, np.zeros(3, dtype=np.uint16))
+
