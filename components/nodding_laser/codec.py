@@ -1199,6 +1199,51 @@ class ScanLineGeometry:
         return out
 
 
+    def scan_line(self, measured: MeasuredValues, nod_deg: tuple[float, float]
+                  ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+        """The driver's path: (count, 3) float32 points of every beam of ``measured``,
+        NaN where a value is not a range, and the validity flags
+        (:meth:`MeasuredValues.ranges_and_valid`, NaN for the invalid ranges, then
+        :meth:`points` in float32). Compiled where numba is available (decision 0028), bit
+        for bit the numpy form. Raises :class:`~afa.errors.EOutOfBounds` if there are not
+        ``count`` values."""
+        if measured.count != self.count:
+            raise EOutOfBounds(f"{measured.count} ranges but {self.count} bearings")
+        kernel = _points_kernel()
+        if kernel is None:
+            ranges, valid = measured.ranges_and_valid()
+            ranges[~valid] = np.nan  # no-return codes become NaN points
+            points = self.points(ranges, nod_deg, dtype=np.float32)
+            return points, valid  # type: ignore[return-value]
+        # (as ranges_and_valid reads the words: the same OverflowError for a bad one)
+        words = np.frombuffer(array.array("I", measured.raw), dtype=np.uint32)
+        start = math.radians(nod_deg[0])
+        nod = start + (math.radians(nod_deg[1]) - start) * self._fraction
+        points = np.empty((self.count, 3), dtype=np.float32)
+        valid = np.empty(self.count, dtype=np.bool_)
+        kernel(words, (1 << measured.range_bits) - 1, measured.no_return_threshold,
+               measured.unit.metres, self._sin, self._minus_cos, np.cos(nod), np.sin(nod),
+               points, valid)
+        return points, valid
+
+
+@functools.cache
+def _points_kernel() -> Callable[..., None] | None:
+    """The compiled scan-line loop (decision 0028), or None for the numpy form: when
+    numba is not installed or cannot compile or cache it here, or ``AFA_KERNELS=numpy``
+    asks for the numpy forms. Loaded on the first scan line."""
+    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
+        return None
+    try:
+        from components.nodding_laser._points_jit import points_kernel
+    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
+        if not (isinstance(exc, ModuleNotFoundError) and exc.name == "numba"):
+            logging.getLogger(__name__).warning("compiled scan-line points unavailable "
+                                                "(%s): numpy fallback", exc)
+        return None
+    return points_kernel  # type: ignore[no-any-return]
+
+
 def scan_line_to_points(ranges_m: npt.ArrayLike, bearings_deg: npt.ArrayLike,
                         nod_deg: float | tuple[float, float],
                         valid: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:

@@ -16,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from afa.errors import EOutOfBounds
+from components.nodding_laser import codec as laser_codec
 from components.nodding_laser.codec import (
     AckResult,
     CommandAck,
@@ -669,4 +670,45 @@ def test_words_from_an_array_are_refused_as_the_tuple_is() -> None:
         encode_measured_words(np.array([1.5, 2.0]))
     with pytest.raises(EOutOfBounds):
         encode_scan_frame(1 << 32, 0, 0, 0, np.zeros(3, dtype=np.uint16))
+
+
+# -- the driver's scan line, compiled and numpy (decision 0028) --------------------------------
+
+def _numpy_scan_line(geometry, measured, nod, monkeypatch):
+    monkeypatch.setattr(laser_codec, "_points_kernel", lambda: None)
+    try:
+        return geometry.scan_line(measured, nod)
+    finally:
+        monkeypatch.undo()
+
+
+@pytest.mark.skipif(laser_codec._points_kernel() is None,
+                    reason="no compiled kernel (numba missing, or AFA_KERNELS=numpy)")
+@pytest.mark.parametrize("count, variant", [(361, (180, 50)), (181, (180, 100)),
+                                            (401, (100, 25))])
+def test_compiled_scan_line_is_bit_for_bit_the_numpy_one(count, variant, monkeypatch):
+    geometry = laser_codec.ScanLineGeometry(scan_bearings_deg(count, *variant))
+    rng = np.random.default_rng(count)
+    for trial in range(40):
+        range_bits = (13, 14, 16)[trial % 3]
+        unit = (RangeUnit.MM, RangeUnit.CM)[trial % 2]
+        words = rng.integers(0, 1 << 16, count)  # flags above the range field too
+        words[rng.random(count) < 0.2] = 0
+        threshold = (1 << range_bits) - laser_codec.NO_RETURN_CODES
+        words[rng.random(count) < 0.2] = threshold + rng.integers(0, laser_codec.NO_RETURN_CODES)
+        measured = MeasuredValues(tuple(int(w) for w in words), unit, range_bits=range_bits)
+        nod = (rng.uniform(-40, 10), rng.uniform(-40, 10))
+        points, valid = geometry.scan_line(measured, nod)
+        expected_points, expected_valid = _numpy_scan_line(geometry, measured, nod,
+                                                           monkeypatch)
+        assert points.dtype == np.float32 and points.shape == (count, 3)
+        assert points.tobytes() == expected_points.tobytes()  # NaNs and signed zeros too
+        np.testing.assert_array_equal(valid, expected_valid)
+        assert valid.dtype == np.bool_ and 0 < valid.sum() < count
+
+
+def test_scan_line_of_the_wrong_count_is_refused():
+    geometry = laser_codec.ScanLineGeometry(scan_bearings_deg(361, 180, 50))
+    with pytest.raises(EOutOfBounds):
+        geometry.scan_line(MeasuredValues((1000,) * 181), (0.0, 0.0))
 
