@@ -1,5 +1,8 @@
-"""The compiled form of :meth:`components.nodding_laser.codec.ScanLineGeometry.scan_line`
-(decision 0014's pattern, decision 0028): one loop over the beams does what the driver's
+"""Compiled scan-line loops (decision 0014's pattern, decision 0028), each bit for bit
+its numpy form: the emulator's value words (:func:`words_kernel`) and the driver's points.
+
+:func:`points_kernel` is :meth:`components.nodding_laser.codec.ScanLineGeometry.scan_line`:
+one loop over the beams does what the driver's
 numpy form does in about fifteen array operations (the range field and the validity of
 each value word, its range in metres as float32, the beam's point as float32, NaN for
 no return), with the same floating-point operations in the same order, so the points are
@@ -16,7 +19,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["points_kernel"]
+__all__ = ["points_kernel", "words_kernel"]
 
 _F64 = numba.float64[::1]
 #: The one signature, compiled (or loaded from the cache) on import.
@@ -49,3 +52,27 @@ def points_kernel(words: np.ndarray, mask: int, threshold: int, metres: float,
             points[i, 0] = nan
             points[i, 1] = nan
             points[i, 2] = nan
+
+
+#: The emulator's kernel: ranges (and noise) in, value words out.
+WORDS_SIGNATURE = numba.void(_F64, _F64, numba.boolean, numba.int64, numba.int64,
+                             numba.uint16[::1])
+
+
+@numba.njit(WORDS_SIGNATURE, cache=True, nogil=True, fastmath=False, error_model="numpy",
+            boundscheck=False)
+def words_kernel(ranges: np.ndarray, noise: np.ndarray, noisy: bool, max_count: int,
+                 no_return: int, words: np.ndarray) -> None:
+    """The fake LMS's value words (:meth:`FakeNodLaser._measure`'s numpy form): each range
+    (m; NaN or inf for no return) plus its ``noise`` if ``noisy``, in millimetres
+    rounded half to even; a count from 1 to below ``max_count`` is sent as it is, any
+    other as the ``no_return`` word."""
+    for i in range(ranges.shape[0]):
+        r = ranges[i]
+        if noisy:
+            r = r + noise[i]
+        count = np.rint(r * 1000.0)
+        if count >= 1 and count < max_count:
+            words[i] = np.uint16(count)
+        else:
+            words[i] = np.uint16(no_return)

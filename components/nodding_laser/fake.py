@@ -24,7 +24,9 @@ Gaussian noise; no-return beams carry code 0x1FFF.
 from __future__ import annotations
 
 import functools
+import logging
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -73,6 +75,23 @@ from components.nodding_laser.codec import (
 from components.nodding_laser.component import SCAN_PERIODS
 
 __all__ = ["FakeNodLaser", "RangeSource", "Waveform", "flat_ground", "NO_RETURN_WORD"]
+
+@functools.cache
+def _words_kernel() -> Callable[..., None] | None:
+    """The compiled value-word loop (decision 0028), or None for the numpy form: when
+    numba is not installed or cannot compile or cache it here, or ``AFA_KERNELS=numpy``
+    asks for the numpy forms. Loaded on the first scan."""
+    if os.environ.get("AFA_KERNELS", "").lower() == "numpy":
+        return None
+    try:
+        from components.nodding_laser._points_jit import words_kernel
+    except Exception as exc:  # no numba, or it cannot compile or cache here: numpy
+        if not (isinstance(exc, ModuleNotFoundError) and exc.name == "numba"):
+            logging.getLogger(__name__).warning("compiled scan words unavailable (%s): "
+                                                "numpy fallback", exc)
+        return None
+    return words_kernel  # type: ignore[no-any-return]
+
 
 @functools.cache
 def _beams(variant: tuple[int, int]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
@@ -334,11 +353,19 @@ class FakeNodLaser(FakeDevice[HostCommand]):
         count = bearings.size
         nod_start, nod_end = self.angle_at(start), self.angle_at(end)
         nod = (nod_start + self.offset_deg) + (nod_end - nod_start) * fraction
-        ranges = np.asarray(self.source(start, nod, bearings), dtype=np.float64).reshape(-1)
+        ranges = np.ascontiguousarray(self.source(start, nod, bearings),
+                                      dtype=np.float64).reshape(-1)
         if ranges.shape != bearings.shape:
             raise ValueError(f"range source returned {ranges.size} values for {count} beams")
-        if self.noise_m > 0:
-            ranges = ranges + self.rng.normal(0.0, self.noise_m, ranges.shape)
+        noisy = self.noise_m > 0
+        noise = self.rng.normal(0.0, self.noise_m, ranges.shape) if noisy else ranges
+        kernel = _words_kernel()
+        if kernel is not None:  # the same words in one compiled loop (decision 0028)
+            words = np.empty(count, dtype=np.uint16)
+            kernel(ranges, noise, noisy, _MAX_COUNT, NO_RETURN_WORD, words)
+            return (nod_start, nod_end), words
+        if noisy:
+            ranges = ranges + noise
         counts = np.rint(ranges * 1000.0)  # np.round without its Python wrapper
         good = (counts >= 1) & (counts < _MAX_COUNT)  # False for NaN and inf
         # (1 .. 8182 mm or the no-return word: all 16-bit)
