@@ -612,9 +612,9 @@ def encode_measured_words(words: npt.NDArray[np.integer], *, unit: RangeUnit = R
         raise EOutOfBounds(f"{words.size} values do not fit the 10-bit count")
     if not 0 <= partial_scan_index <= 3:
         raise EOutOfBounds("partial scan index is 0..3")
-    if words.dtype.kind not in "iu" or (
-            words.size and not (words.min() >= 0 and words.max() <= 0xFFFF)):
-        raise EOutOfBounds("measured value words are 16-bit")
+    if words.dtype != np.uint16 and (words.dtype.kind not in "iu" or (
+            words.size and not (words.min() >= 0 and words.max() <= 0xFFFF))):
+        raise EOutOfBounds("measured value words are 16-bit")  # (uint16 ones are)
     word = words.size | (partial_scan_index << 11) | (_UNIT_CODE[unit] << 14)
     data = _U16.pack(word) + words.astype("<u2").tobytes()
     return encode_sick_telegram(REPLY_MEASURED_VALUES, data, address=address, status=status)
