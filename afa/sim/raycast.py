@@ -46,7 +46,7 @@ __all__ = ["cast_rays", "laser_scan", "laser_directions", "camera_directions", "
 FloatArray = NDArray[np.float64]
 
 
-def _load_kernel() -> Callable[..., None] | None:
+def _load_kernel() -> Callable[..., bool] | None:
     """The compiled caster (decision 0014), or None for the numpy passes: when numba is
     not installed or cannot compile or cache the kernel here, or ``AFA_KERNELS=numpy``
     asks for them."""
