@@ -10,7 +10,8 @@ requests, through a three-line C shim compiled here with ``cc`` against
 ``valgrind/callgrind.h``). Start-up, imports, numba's cache loading and the warm-up are
 not counted, so two commits compare on one run each (the earlier method, cachegrind
 totals of two durations subtracted, carried start-up differences of +-40 M instructions
-between runs).
+between runs). The run has one OpenBLAS thread and a fixed hash seed (below): with
+OpenBLAS's spinning worker threads the counts of one commit differed by up to 5 %.
 
 Needs valgrind (with its headers: Debian's ``valgrind`` package) and a C compiler. A run
 takes a few minutes (valgrind is ~50 times slower than the program). Prints the count,
@@ -100,8 +101,12 @@ def main() -> None:
                    f"--callgrind-out-file={out}", sys.executable, str(Path(__file__).resolve()),
                    "--stack", args.stack, "--warm", str(args.warm), "--duration",
                    str(args.duration), "--inner", str(shim)]
-        done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT,
-                              env={**os.environ, "PYTHONPATH": str(ROOT)})
+        # OpenBLAS's worker threads spin while they wait, for as long as the (valgrind-
+        # slowed, load-dependent) wall clock says: one thread makes the count repeatable.
+        # A fixed hash seed makes dict and set layouts repeatable too.
+        env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1",
+               "PYTHONHASHSEED": "0"}
+        done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, env=env)
         if done.returncode != 0:
             raise SystemExit(f"run failed ({' '.join(command)}):\n{done.stderr[-3000:]}")
         dumps = sorted(directory.glob("callgrind.out.*"))  # the dump; .out is the rest
