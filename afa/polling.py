@@ -65,22 +65,39 @@ class LatestSlot(Generic[T]):
         self._clock = clock
         self._what = what
         self._value: T | None = None
+        self._make: Callable[[], T] | None = None  # the latest sample, not built yet
         self._version = 0
         self._waiters: list[asyncio.Future[T]] = []
 
     def set(self, value: T) -> None:
         """Store a new sample and wake every ``wait_next`` caller."""
         self._value = value
+        self._make = None
         self._version += 1
         waiters, self._waiters = self._waiters, []
         for waiter in waiters:
             if not waiter.done():
                 waiter.set_result(value)
 
+    def set_lazy(self, make: Callable[[], T]) -> None:
+        """Store a new sample that ``make()`` builds when it is first read (by
+        :meth:`get`), or now if a ``wait_next`` caller is waiting: for a sample that
+        arrives far more often than it is asked for. ``make`` must give the same value
+        whenever it is called (capture what it needs, such as the receipt time)."""
+        if self._waiters:
+            self.set(make())
+            return
+        self._value = None
+        self._make = make
+        self._version += 1
+
     def get(self) -> T:
         """The latest sample; raises :class:`~afa.errors.EDevIO` if there is none yet."""
         if self._version == 0:
             raise EDevIO(f"no {self._what} received yet")
+        make = self._make
+        if make is not None:
+            self._value, self._make = make(), None
         return self._value  # type: ignore[return-value]
 
     @property

@@ -361,7 +361,7 @@ class RaptorSimulation:
             self._poses_of, self._poses = state, {}
         pose = self._poses.get(frame)
         if pose is None:
-            pose = self._poses[frame] = state.transform() @ self.mount(frame)
+            pose = self._poses[frame] = _body_pose(self._poses, state) @ self.mount(frame)
             pose.flags.writeable = False
         return pose
 
@@ -386,7 +386,8 @@ class RaptorSimulation:
         poses = step[2]
         pose = poses.get(frame)
         if pose is None:
-            pose = poses[frame] = step[1].transform() @ self.mount(frame)
+            pose = poses[frame] = _body_pose(poses, step[1]) @ self.mount(frame)
+            pose.flags.writeable = False  # (the dict may be frame_pose's: shared)
         return pose
 
     def rng(self) -> np.random.Generator:
@@ -536,7 +537,9 @@ class RaptorSimulation:
             speed = 0.0 if brake else translation
             before = self.vehicle.collision
             self.vehicle.step(PHYSICS_STEP, speed, math.degrees(steering), self.terrain)
-            self._history.append((self.clock.monotonic(), self.state, {}))
+            # the new state's frame poses: one dict for frame_pose and frame_pose_at
+            self._poses_of, self._poses = self.state, {}
+            self._history.append((self.clock.monotonic(), self.state, self._poses))
             if self.state.distance >= self._track_next:
                 self.track.append((self.state.east, self.state.north))
                 self._track_next = self.state.distance + TRACK_STEP
@@ -837,3 +840,12 @@ class RaptorSimulation:
         s = self.state
         return (f"pos=({s.east:7.1f},{s.north:7.1f}) hdg={s.heading_deg:5.1f} "
                 f"v={s.speed:4.2f} m/s dist={s.distance:6.1f} m collisions={len(self.collisions)}")
+
+
+def _body_pose(poses: dict[str, np.ndarray], state: VehicleState) -> np.ndarray:
+    """``state.transform()``, kept in ``poses`` (the frame poses of that state) under
+    the key "" (no frame's name) so that the lasers' and the camera's frames share it."""
+    body = poses.get("")
+    if body is None:
+        body = poses[""] = state.transform()
+    return body

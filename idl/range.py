@@ -72,9 +72,10 @@ def _check_static(points: np.ndarray, valid: np.ndarray, what: str) -> None:
 def select_valid(points: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """``points[valid]`` as a fresh ``(n, 3)`` array in row-major order, for the static
     array forms (beams ``(N, 3)`` with ``(N,)`` flags, pixels ``(R, C, 3)`` with
-    ``(R, C)``). ``np.compress`` on the flattened rows is several times faster than a
-    boolean mask over a 3-D array."""
-    return np.compress(np.ravel(valid), points.reshape(-1, 3), axis=0)
+    ``(R, C)``). ``compress`` on the flattened rows is several times faster than a
+    boolean mask over a 3-D array (the method: ``np.compress`` and ``np.ravel`` add a
+    Python wrapper each, on every scan line)."""
+    return np.asarray(points).reshape(-1, 3).compress(np.asarray(valid).reshape(-1), axis=0)
 
 
 def _check_sequence(points: np.ndarray, what: str) -> None:

@@ -22,7 +22,7 @@ __all__ = ["cast_kernel"]
 #: The one signature, compiled (or loaded from the cache) when this module is imported.
 #: (The terrain's arrays are read-only.)
 _FROZEN = numba.types.Array(numba.float32, 1, "C", readonly=True)
-SIGNATURE = numba.void(numba.float64[:, ::1], numba.float64[:, ::1], _FROZEN,
+SIGNATURE = numba.boolean(numba.float64[:, ::1], numba.float64[:, ::1], _FROZEN,
                        numba.int64, numba.int64, _FROZEN, numba.int64,
                        numba.float64, numba.float64, numba.float64, numba.int64, numba.int64,
                        numba.float64, numba.boolean, numba.float64, numba.float64,
@@ -31,21 +31,28 @@ SIGNATURE = numba.void(numba.float64[:, ::1], numba.float64[:, ::1], _FROZEN,
 
 @numba.njit(SIGNATURE, cache=True, nogil=True, fastmath=False, error_model="numpy",
             boundscheck=False)
-def cast_kernel(origins: np.ndarray, unit: np.ndarray,
+def cast_kernel(origins: np.ndarray, directions: np.ndarray,
                 bmax: np.ndarray, bx: int, by: int,
                 surface: np.ndarray, width: int, east0: float, north0: float, res: float,
                 block: int, n_seg: int, max_range: float, clamp: bool, block_pad: float,
-                x_max: float, y_max: float, ranges: np.ndarray) -> None:
-    """Fill ``ranges`` (NaN where nothing is hit). ``origins``: (1, 3), shared, or one
-    per ray (N, 3); ``unit``: (N, 3) unit directions; ``bmax`` and ``surface`` flat (rows
-    of ``bx`` and ``width``)."""
-    n = unit.shape[0]
+                x_max: float, y_max: float, ranges: np.ndarray) -> bool:
+    """Fill ``ranges`` (NaN where nothing is hit); False if a direction's length is not
+    > 0 (zero or NaN: the caller raises; ``ranges`` is then incomplete). ``origins``:
+    (1, 3), shared, or one per ray (N, 3); ``directions``: (N, 3), normalised here as
+    :func:`cast_rays`'s numpy form does (the same operations in the same order);
+    ``bmax`` and ``surface`` flat (rows of ``bx`` and ``width``)."""
+    n = directions.shape[0]
     shared = origins.shape[0] == 1
     seg = block * res
     for r in range(n):
+        ranges[r] = math.nan
         o = 0 if shared else r
         x, y, z = origins[o, 0], origins[o, 1], origins[o, 2]
-        ddx, ddy, ddz = unit[r, 0], unit[r, 1], unit[r, 2]
+        dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+        length = math.sqrt((dx * dx + dz * dz) + dy * dy)
+        if not length > 0:
+            return False
+        ddx, ddy, ddz = dx / length, dy / length, dz / length
         # the coarse pass's bounds, as cast_rays computes them
         z_base = z - 1e-6 + min(ddz, 0.0) * seg
         bi0 = (x - east0) / seg + block_pad + min(ddx, 0.0)
@@ -95,3 +102,4 @@ def cast_kernel(origins: np.ndarray, unit: np.ndarray,
             else:
                 continue
             break
+    return True

@@ -45,7 +45,7 @@ __all__ = ["cast_rays", "laser_scan", "laser_directions", "camera_directions", "
 FloatArray = NDArray[np.float64]
 
 
-def _load_kernel() -> Callable[..., None] | None:
+def _load_kernel() -> Callable[..., bool] | None:
     """The compiled caster (decision 0014), or None for the numpy passes
     (:func:`afa.kernels.compiled`)."""
     return compiled("afa.sim._raycast_jit", "cast_kernel")  # type: ignore[no-any-return]
@@ -76,16 +76,21 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     if not (math.isfinite(max_range) and max_range > 0):
         raise ValueError("max_range must be finite and > 0")
     n_rays = d.shape[0]
-    ranges = np.full(n_rays, np.nan)
     if n_rays == 0:
+        return np.full(0, np.nan)
+    if KERNEL is not None:  # it normalises the directions itself, as below
+        ranges = np.empty(n_rays)
+        if not _cast_compiled(terrain, o, shared, d, max_range, block, ranges):
+            raise ValueError("directions must be non-zero")
         return ranges
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    ranges = np.full(n_rays, np.nan)
+    # each length as (x^2 + z^2) + y^2, in that order: the order numpy's einsum
+    # ("ij,ij->i") sums three products in, and the compiled kernel's
+    x2, y2, z2 = (d * d).T
+    length = np.sqrt((x2 + z2) + y2)
     if not length.min() > 0:  # also False for NaN
         raise ValueError("directions must be non-zero")
     unit = d / length[:, None]
-    if KERNEL is not None:
-        _cast_compiled(terrain, o, shared, unit, max_range, block, ranges)
-        return ranges
     dx, dy, dz = unit.T
     # a shared origin as scalars, per-ray origins as (N,) vectors (broadcast either way)
     ox, oy, oz = o.tolist() if shared else o.T
@@ -184,10 +189,11 @@ def cast_rays(terrain: Terrain, origins: ArrayLike, directions: ArrayLike, max_r
     return ranges
 
 
-def _cast_compiled(terrain: Terrain, o: FloatArray, shared: bool, unit: FloatArray,
-                   max_range: float, block: int, ranges: FloatArray) -> None:
-    """The passes below, compiled (decision 0014): the same bounds, clamping and
-    arithmetic, one loop per ray."""
+def _cast_compiled(terrain: Terrain, o: FloatArray, shared: bool, d: FloatArray,
+                   max_range: float, block: int, ranges: FloatArray) -> bool:
+    """The passes below, compiled (decision 0014): the same normalisation, bounds,
+    clamping and arithmetic, one loop per ray. False for a direction of length zero or
+    NaN."""
     res = terrain.resolution
     n_seg = int(math.ceil(max_range / (block * res)))
     east0, north0 = float(terrain.east0), float(terrain.north0)
@@ -200,9 +206,9 @@ def _cast_compiled(terrain: Terrain, o: FloatArray, shared: bool, unit: FloatArr
         reach = n_seg * block + 1.0
         clamp = not (reach <= gx <= x_max - reach and reach <= gy <= y_max - reach)
     bmax, bx, by, surface, width = terrain.ray_tables(block)
-    KERNEL(np.ascontiguousarray(o.reshape(-1, 3)), unit, bmax, bx, by, surface, width,
-           east0, north0, float(res), block, n_seg, float(max_range), clamp,
-           float(BLOCK_PAD), x_max, y_max, ranges)
+    return bool(KERNEL(np.ascontiguousarray(o.reshape(-1, 3)), np.ascontiguousarray(d), bmax,
+                       bx, by, surface, width, east0, north0, float(res), block, n_seg,
+                       float(max_range), clamp, float(BLOCK_PAD), x_max, y_max, ranges))
 
 
 @functools.lru_cache(maxsize=8)

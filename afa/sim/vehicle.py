@@ -143,11 +143,17 @@ class VehicleState:
         ])
 
     def transform(self) -> NDArray[np.float64]:
-        """World-from-body homogeneous transform (4x4)."""
-        t = np.eye(4)
-        t[:3, :3] = self.rotation()
-        t[:3, 3] = self.position
-        return t
+        """World-from-body homogeneous transform (4x4): :meth:`rotation` and
+        :attr:`position` (the same expressions, built as one array)."""
+        cy, sy = math.cos(self.yaw), math.sin(self.yaw)
+        cp, sp = math.cos(self.pitch), math.sin(self.pitch)
+        cr, sr = math.cos(self.roll), math.sin(self.roll)
+        return np.array([
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr, self.east],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr, self.north],
+            [-sp, cp * sr, cp * cr, self.up],
+            [0.0, 0.0, 0.0, 1.0],
+        ])
 
     def velocity(self) -> NDArray[np.float64]:
         """Velocity of the rear axle centre in the world frame (m/s)."""

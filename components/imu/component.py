@@ -27,6 +27,7 @@ apart on average whatever the unit's rate, and no sample is ever published twice
 
 from __future__ import annotations
 
+import functools
 from typing import Any, ClassVar
 
 from afa.codec import StreamDecoder
@@ -146,13 +147,16 @@ class Imu(PublishServerReactor[ImuParameters, ImuReply]):
 
     def handle(self, message: ImuReply) -> None:
         if isinstance(message, EulerAccelRate):
-            body = imu_idl(message, self.clock.now())
+            now = self.clock.now()
             self.samples += 1
             assert self._latest is not None
-            self._latest.set(body)
             if self._events.enabled and self._due(self.clock.monotonic()):
+                body = imu_idl(message, now)
+                self._latest.set(body)
                 self._events.publish(body)
                 self.published += 1
+            else:  # 100 samples a second, one in ten published: the rest built if polled
+                self._latest.set_lazy(functools.partial(imu_idl, message, now))
         elif isinstance(message, ContinuousModeSet):
             if message.command not in (CMD_GYRO_STAB_EULER_ACCEL_RATE, 0x00):
                 self.log.warning("continuous mode set to 0x%02X, expected 0x31", message.command)

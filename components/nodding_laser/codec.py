@@ -55,6 +55,7 @@ __all__ = [
     "encode_sick_message", "encode_switch_mode", "encode_start_continuous",
     "encode_stop_continuous", "encode_request_measured_values", "encode_switch_variant",
     "encode_mode_reply", "encode_variant_reply", "encode_measured_values",
+    "encode_measured_words", "encode_scan_frame",
     "SickTelegramDecoder",
     "CONTROLLER_SYNC", "CONTROLLER_VERSION", "CONTROLLER_HEADER_SIZE",
     "CONTROLLER_MAX_PAYLOAD", "FrameType", "AckResult", "ControllerState",
@@ -587,6 +588,32 @@ def encode_variant_reply(accepted: bool, scan_angle_deg: int, resolution_cdeg: i
                                 status=status)
 
 
+def encode_measured_words(words: npt.NDArray[np.integer], *, unit: RangeUnit = RangeUnit.MM,
+                          status: int = 0x10, partial_scan_index: int = 0,
+                          address: int = LMS_ADDRESS | REPLY_ADDRESS_BIT) -> bytes:
+    """:func:`encode_measured_values` of ``MeasuredValues(tuple(words), unit, status,
+    partial_scan_index, address=address)``, the same bytes, from an integer array of
+    value words without making a tuple of them (the emulator's path, 75 scan lines a
+    simulated second).
+
+    Raises :class:`~afa.errors.EOutOfBounds` as :func:`encode_measured_values` does.
+    """
+    words = np.asarray(words).reshape(-1)
+    if words.size > 0x03FF:
+        raise EOutOfBounds(f"{words.size} values do not fit the 10-bit count")
+    if not 0 <= partial_scan_index <= 3:
+        raise EOutOfBounds("partial scan index is 0..3")
+    if words.dtype != np.uint16 and (words.dtype.kind not in "iu" or (
+            words.size and not (words.min() >= 0 and words.max() <= 0xFFFF))):
+        raise EOutOfBounds("measured value words are 16-bit")  # (uint16 ones are)
+    word = words.size | (partial_scan_index << 11) | (_UNIT_CODE[unit] << 14)
+    data = _U16.pack(word) + words.astype("<u2").tobytes()
+    return encode_sick_telegram(REPLY_MEASURED_VALUES, data, address=address, status=status)
+
+
+_U16 = struct.Struct("<H")
+
+
 def encode_measured_values(values: MeasuredValues) -> bytes:
     """Reply 0xB0: count word (count, partial scan index, unit), value words, status.
 
@@ -921,6 +948,25 @@ def encode_controller_message(message: ControllerMessage) -> bytes:
     return encode_controller_frame(FrameType.SICK_REPLY, payload, seq=message.seq)
 
 
+def encode_scan_frame(scan_counter: int, timestamp_us: int, nod_start_udeg: int,
+                      nod_end_udeg: int, words: npt.NDArray[np.integer], *, seq: int = 0,
+                      status: int = 0x10) -> bytes:
+    """Device side: the SCAN frame that :func:`encode_controller_message` makes of
+    ``NodScan(scan_counter, timestamp_us, nod_start_udeg, nod_end_udeg,
+    MeasuredValues(tuple(words), RangeUnit.MM, status), seq)``, the same bytes, from an
+    array of value words (:func:`encode_measured_words`).
+
+    Raises :class:`~afa.errors.EOutOfBounds` on out-of-range fields.
+    """
+    _check_int("scan counter", scan_counter, 0, 0xFFFFFFFF)
+    _check_int("timestamp", timestamp_us, 0, (1 << 64) - 1)
+    _check_int("nod start", nod_start_udeg, *_I32)
+    _check_int("nod end", nod_end_udeg, *_I32)
+    payload = _SCAN_PREFIX.pack(scan_counter, timestamp_us, nod_start_udeg, nod_end_udeg)
+    payload += encode_measured_words(words, status=status)
+    return encode_controller_frame(FrameType.SCAN, payload, seq=seq)
+
+
 def encode_host_command(command: HostCommand) -> bytes:
     """Host side: encode a host -> controller command frame.
 
@@ -1142,6 +1188,42 @@ class ScanLineGeometry:
         np.multiply(r, self._minus_cos, out=out[:, 1], casting="same_kind")
         np.multiply(forward, np.sin(nod), out=out[:, 2], casting="same_kind")
         return out
+
+
+    def scan_line(self, measured: MeasuredValues, nod_deg: tuple[float, float]
+                  ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+        """The driver's path: (count, 3) float32 points of every beam of ``measured``,
+        NaN where a value is not a range, and the validity flags
+        (:meth:`MeasuredValues.ranges_and_valid`, NaN for the invalid ranges, then
+        :meth:`points` in float32). Compiled where numba is available (decision 0030), bit
+        for bit the numpy form. Raises :class:`~afa.errors.EOutOfBounds` if there are not
+        ``count`` values."""
+        if measured.count != self.count:
+            raise EOutOfBounds(f"{measured.count} ranges but {self.count} bearings")
+        kernel = _points_kernel()
+        if kernel is None:
+            ranges, valid = measured.ranges_and_valid()
+            ranges[~valid] = np.nan  # no-return codes become NaN points
+            points = self.points(ranges, nod_deg, dtype=np.float32)
+            return points, valid  # type: ignore[return-value]
+        # (as ranges_and_valid reads the words: the same OverflowError for a bad one)
+        words = np.frombuffer(array.array("I", measured.raw), dtype=np.uint32)
+        start = math.radians(nod_deg[0])
+        nod = start + (math.radians(nod_deg[1]) - start) * self._fraction
+        points = np.empty((self.count, 3), dtype=np.float32)
+        valid = np.empty(self.count, dtype=np.bool_)
+        kernel(words, (1 << measured.range_bits) - 1, measured.no_return_threshold,
+               measured.unit.metres, self._sin, self._minus_cos, np.cos(nod), np.sin(nod),
+               points, valid)
+        return points, valid
+
+
+@functools.cache
+def _points_kernel() -> Callable[..., None] | None:
+    """The compiled scan-line loop (decision 0030), or None for the numpy form
+    (:func:`afa.kernels.compiled`). Loaded on the first scan line."""
+    return compiled("components.nodding_laser._points_jit",  # type: ignore[no-any-return]
+                    "points_kernel")
 
 
 def scan_line_to_points(ranges_m: npt.ArrayLike, bearings_deg: npt.ArrayLike,

@@ -337,9 +337,7 @@ class NodLaser(PublishServerReactor[NodLaserParameters, ControllerMessage]):
 
         offset = self.parameters.LaserOffsetAngle
         nod_start, nod_end = scan.nod_start_deg + offset, scan.nod_end_deg + offset
-        ranges, valid = measured.ranges_and_valid()
-        ranges[~valid] = np.nan  # no-return codes become NaN points
-        points = self._geometry.points(ranges, (nod_start, nod_end), dtype=np.float32)
+        points, valid = self._geometry.scan_line(measured, (nod_start, nod_end))
         points.flags.writeable = False
         valid.flags.writeable = False
         line = _ScanLine(TimeIDL.from_seconds(stamp), self.parameters.LaserID, self.frame,

@@ -37,6 +37,7 @@ from afa.clock import Clock
 from afa.codec import StreamDecoder
 from afa.errors import EDevIO
 from afa.fake import FakeDevice
+from afa.kernels import compiled
 from afa.transport import ByteStream
 from components.nodding_laser.codec import (
     ACK,
@@ -51,7 +52,6 @@ from components.nodding_laser.codec import (
     HostCommand,
     MeasuredValues,
     NodHostCommandDecoder,
-    NodScan,
     OperatingModeReply,
     RangeUnit,
     RequestMeasuredValues,
@@ -68,11 +68,20 @@ from components.nodding_laser.codec import (
     SwitchVariant,
     VariantReply,
     encode_controller_message,
+    encode_scan_frame,
     scan_bearings_deg,
 )
 from components.nodding_laser.component import SCAN_PERIODS
 
 __all__ = ["FakeNodLaser", "RangeSource", "Waveform", "flat_ground", "NO_RETURN_WORD"]
+
+@functools.cache
+def _words_kernel() -> Callable[..., None] | None:
+    """The compiled value-word loop (decision 0030), or None for the numpy form
+    (:func:`afa.kernels.compiled`). Loaded on the first scan."""
+    return compiled("components.nodding_laser._points_jit",  # type: ignore[no-any-return]
+                    "words_kernel")
+
 
 @functools.cache
 def _beams(variant: tuple[int, int]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
@@ -319,42 +328,54 @@ class FakeNodLaser(FakeDevice[HostCommand]):
             reply = VariantReply(accepted, *self.variant, 0x10)
         elif isinstance(sick, RequestMeasuredValues):
             now = self.clock.monotonic()
-            reply = self._measure(now - self.scan_period, now)[1]
+            words = self._measure(now - self.scan_period, now)[1]
+            reply = MeasuredValues(tuple(words.tolist()), RangeUnit.MM, 0x10, 0, _RANGE_BITS)
         else:
             ack = NAK  # commands this LMS model does not implement
         await self._send(stream, SickReply(ack, reply, self._next_seq()))
         return AckResult.OK
 
     def _measure(self, start: float, end: float) -> tuple[tuple[float, float],
-                                                          MeasuredValues]:
-        """Encoder angles at both ends and the LMS's 0xB0 reply for one scan."""
+                                                          npt.NDArray[np.uint16]]:
+        """Encoder angles at both ends and the value words of the LMS's 0xB0 reply for
+        one scan."""
         bearings, fraction = _beams(self.variant)
         count = bearings.size
         nod_start, nod_end = self.angle_at(start), self.angle_at(end)
         nod = (nod_start + self.offset_deg) + (nod_end - nod_start) * fraction
-        ranges = np.asarray(self.source(start, nod, bearings), dtype=np.float64).reshape(-1)
+        ranges = np.ascontiguousarray(self.source(start, nod, bearings),
+                                      dtype=np.float64).reshape(-1)
         if ranges.shape != bearings.shape:
             raise ValueError(f"range source returned {ranges.size} values for {count} beams")
-        if self.noise_m > 0:
-            ranges = ranges + self.rng.normal(0.0, self.noise_m, ranges.shape)
+        noisy = self.noise_m > 0
+        noise = self.rng.normal(0.0, self.noise_m, ranges.shape) if noisy else ranges
+        kernel = _words_kernel()
+        if kernel is not None:  # the same words in one compiled loop (decision 0030)
+            words = np.empty(count, dtype=np.uint16)
+            kernel(ranges, noise, noisy, _MAX_COUNT, NO_RETURN_WORD, words)
+            return (nod_start, nod_end), words
+        if noisy:
+            ranges = ranges + noise
         counts = np.rint(ranges * 1000.0)  # np.round without its Python wrapper
         good = (counts >= 1) & (counts < _MAX_COUNT)  # False for NaN and inf
-        words = np.where(good, counts, NO_RETURN_WORD).astype(np.int64)
-        raw = tuple(words.tolist())
-        return (nod_start, nod_end), MeasuredValues(raw, RangeUnit.MM, 0x10, 0, _RANGE_BITS)
+        # (1 .. 8182 mm or the no-return word: all 16-bit)
+        return (nod_start, nod_end), np.where(good, counts, NO_RETURN_WORD).astype(np.uint16)
 
     async def _send_scan(self, stream: ByteStream, start: float, end: float) -> None:
-        (nod_start, nod_end), measured = self._measure(start, end)
-        scan = NodScan(self.scan_counter, max(0, round((start - self.boot) * 1e6)),
-                       round(nod_start * 1e6), round(nod_end * 1e6), measured,
-                       self._next_seq())
+        (nod_start, nod_end), words = self._measure(start, end)
+        # the bytes of encode_controller_message(NodScan(..., MeasuredValues(words))),
+        # without a tuple of 361 ints
+        frame = encode_scan_frame(self.scan_counter, max(0, round((start - self.boot) * 1e6)),
+                                  round(nod_start * 1e6), round(nod_end * 1e6), words,
+                                  seq=self._next_seq())
         self.scan_counter = (self.scan_counter + 1) & 0xFFFFFFFF
-        frame = bytearray(encode_controller_message(scan))
         if self._corrupt_pending:
             self._corrupt_pending -= 1
-            frame[len(frame) // 2] ^= 0x10
+            damaged = bytearray(frame)
+            damaged[len(damaged) // 2] ^= 0x10
+            frame = bytes(damaged)
         self.scans_sent += 1
-        await stream.write(bytes(frame))
+        await stream.write(frame)
 
     # -- controller frames ---------------------------------------------------------------------
     def _status(self) -> ControllerStatus:

@@ -21,6 +21,7 @@ from afa.cli import main
 from afa.testing import until
 from afa.transport import AsyncioByteStream, ByteStream, DeviceSpec
 from components.nodding_laser import NodLaser, NodLaserParameters
+from components.nodding_laser import fake as fake_module
 from components.nodding_laser.codec import (
     RequestStatus,
     SetNodLimits,
@@ -440,3 +441,39 @@ async def test_the_driver_talks_to_the_fake_through_a_real_tcp_socket():
     assert len(scan.points) > 0 and np.all(np.abs(scan.points[:, 2] + 2.0) <= 6e-4)
     assert component.statistics()["connects"] == 1
     assert [type(c) for c in fake.commands][:2] == [SickCommand, StopNodding]
+
+
+@pytest.mark.skipif(fake_module._words_kernel() is None,
+                    reason="no compiled kernel (numba missing, or AFA_KERNELS=numpy)")
+@pytest.mark.parametrize("noise_m", [0.0, 0.01])
+def test_the_fakes_compiled_value_words_are_the_numpy_ones(noise_m, monkeypatch):
+    # ranges at and around every boundary: no return (NaN, inf), negative, zero, half a
+    # millimetre (rounded half to even), the first no-return count, beyond
+    special = np.array([np.nan, np.inf, -np.inf, -1.0, 0.0, 0.0005, 0.0015, 0.0025, 0.001,
+                        8.1815, 8.1825, 8.1835, 8.183, 8.2, 100.0])
+    rng = np.random.default_rng(2)
+
+    def source(t, nod_deg, bearings_deg):
+        ranges = rng.uniform(-0.5, 9.0, bearings_deg.size)
+        ranges[:special.size] = special
+        return ranges
+
+    def words(kernel):
+        clock = VirtualClock(start=0.0)
+        fake = FakeNodLaser(clock, source=source, noise_m=noise_m,
+                            rng=np.random.default_rng(5))
+        if not kernel:
+            monkeypatch.setattr(fake_module, "_words_kernel", lambda: None)
+        try:
+            return [fake._measure(0.1 * k, 0.1 * k + 0.0266)[1] for k in range(30)]
+        finally:
+            monkeypatch.undo()
+
+    state = rng.bit_generator.state
+    compiled = words(True)
+    rng.bit_generator.state = state
+    reference = words(False)
+    for a, b in zip(compiled, reference, strict=True):
+        assert a.dtype == b.dtype == np.uint16
+        np.testing.assert_array_equal(a, b)
+    assert (np.concatenate(compiled) == fake_module.NO_RETURN_WORD).sum() > 100

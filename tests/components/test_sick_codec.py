@@ -16,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from afa.errors import EOutOfBounds
+from components.nodding_laser import codec as laser_codec
 from components.nodding_laser.codec import (
     AckResult,
     CommandAck,
@@ -50,8 +51,10 @@ from components.nodding_laser.codec import (
     encode_controller_message,
     encode_host_command,
     encode_measured_values,
+    encode_measured_words,
     encode_mode_reply,
     encode_request_measured_values,
+    encode_scan_frame,
     encode_sick_message,
     encode_sick_telegram,
     encode_start_continuous,
@@ -634,3 +637,78 @@ def test_both_crc_forms_equal_the_manuals_routine(form: str, monkeypatch) -> Non
     for data in samples:
         assert codec.sick_crc16(data) == codec.sick_crc16_reference(data)
     assert codec.sick_crc16(CAPTURED_SCAN_361[:-2]) == 0x4764
+
+
+# -- value words from an array (the emulator's path, decision 0030) ---------------------------
+
+@PROPERTY
+@given(words=st.lists(st.integers(0, 0xFFFF), max_size=0x3FF),
+       status=st.integers(0, 0xFF), counter=st.integers(0, 0xFFFFFFFF),
+       stamp=st.integers(0, (1 << 64) - 1), start=st.integers(-(1 << 31), (1 << 31) - 1),
+       end=st.integers(-(1 << 31), (1 << 31) - 1), seq=st.integers(0, 0xFF),
+       dtype=st.sampled_from([np.int64, np.uint16, np.int32, np.uint32]))
+def test_words_from_an_array_encode_as_the_tuple_does(words: list[int], status: int,
+                                                     counter: int, stamp: int, start: int,
+                                                     end: int, seq: int, dtype: type) -> None:
+    array = np.array(words, dtype=dtype)
+    values = MeasuredValues(tuple(words), RangeUnit.MM, status)
+    assert encode_measured_words(array, status=status) == encode_measured_values(values)
+    scan = NodScan(counter, stamp, start, end, values, seq)
+    assert encode_scan_frame(counter, stamp, start, end, array, seq=seq, status=status) \
+        == encode_controller_message(scan)
+
+
+def test_words_from_an_array_are_refused_as_the_tuple_is() -> None:
+    for words in ([0x10000], [-1], [5, 0x1FFFF]):
+        with pytest.raises(EOutOfBounds):
+            encode_measured_values(MeasuredValues(tuple(words)))
+        with pytest.raises(EOutOfBounds):
+            encode_measured_words(np.array(words, dtype=np.int64))
+    with pytest.raises(EOutOfBounds):
+        encode_measured_words(np.zeros(0x400, dtype=np.uint16))
+    with pytest.raises(EOutOfBounds):  # not integers
+        encode_measured_words(np.array([1.5, 2.0]))
+    with pytest.raises(EOutOfBounds):
+        encode_scan_frame(1 << 32, 0, 0, 0, np.zeros(3, dtype=np.uint16))
+
+
+# -- the driver's scan line, compiled and numpy (decision 0030) --------------------------------
+
+def _numpy_scan_line(geometry, measured, nod, monkeypatch):
+    monkeypatch.setattr(laser_codec, "_points_kernel", lambda: None)
+    try:
+        return geometry.scan_line(measured, nod)
+    finally:
+        monkeypatch.undo()
+
+
+@pytest.mark.skipif(laser_codec._points_kernel() is None,
+                    reason="no compiled kernel (numba missing, or AFA_KERNELS=numpy)")
+@pytest.mark.parametrize("count, variant", [(361, (180, 50)), (181, (180, 100)),
+                                            (401, (100, 25))])
+def test_compiled_scan_line_is_bit_for_bit_the_numpy_one(count, variant, monkeypatch):
+    geometry = laser_codec.ScanLineGeometry(scan_bearings_deg(count, *variant))
+    rng = np.random.default_rng(count)
+    for trial in range(40):
+        range_bits = (13, 14, 16)[trial % 3]
+        unit = (RangeUnit.MM, RangeUnit.CM)[trial % 2]
+        words = rng.integers(0, 1 << 16, count)  # flags above the range field too
+        words[rng.random(count) < 0.2] = 0
+        threshold = (1 << range_bits) - laser_codec.NO_RETURN_CODES
+        words[rng.random(count) < 0.2] = threshold + rng.integers(0, laser_codec.NO_RETURN_CODES)
+        measured = MeasuredValues(tuple(int(w) for w in words), unit, range_bits=range_bits)
+        nod = (rng.uniform(-40, 10), rng.uniform(-40, 10))
+        points, valid = geometry.scan_line(measured, nod)
+        expected_points, expected_valid = _numpy_scan_line(geometry, measured, nod,
+                                                           monkeypatch)
+        assert points.dtype == np.float32 and points.shape == (count, 3)
+        assert points.tobytes() == expected_points.tobytes()  # NaNs and signed zeros too
+        np.testing.assert_array_equal(valid, expected_valid)
+        assert valid.dtype == np.bool_ and 0 < valid.sum() < count
+
+
+def test_scan_line_of_the_wrong_count_is_refused():
+    geometry = laser_codec.ScanLineGeometry(scan_bearings_deg(361, 180, 50))
+    with pytest.raises(EOutOfBounds):
+        geometry.scan_line(MeasuredValues((1000,) * 181), (0.0, 0.0))
+

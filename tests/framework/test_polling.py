@@ -117,6 +117,36 @@ async def test_get_wait_returns_the_next_new_sample_not_the_current_one():
     await producer
 
 
+async def test_a_lazy_sample_is_built_once_when_read_and_at_once_for_a_waiter():
+    clock = VirtualClock(start=0.0)
+    server, proxy = make(clock)
+    built: list[float] = []
+
+    def sample(value: float):
+        def make_it():
+            built.append(value)
+            return Reading(value=value)
+        return make_it
+
+    server.slot.set_lazy(sample(1.0))
+    server.slot.set_lazy(sample(2.0))  # replaces the first, which is never built
+    assert built == [] and server.slot.version == 2
+    assert (await proxy.getReading()).value == 2.0
+    assert (await proxy.getReading()).value == 2.0
+    assert built == [2.0]  # built once
+    server.slot.set(Reading(value=3.0))  # a plain sample after a lazy one
+    assert (await proxy.getReading()).value == 3.0
+
+    async def produce():
+        await clock.sleep(0.2)
+        server.slot.set_lazy(sample(5.0))  # a caller waits: built now
+
+    producer = asyncio.get_running_loop().create_task(produce())
+    assert (await proxy.getWaitReading()).value == 5.0
+    assert built == [2.0, 5.0]
+    await producer
+
+
 async def test_get_wait_times_out_with_etimeout():
     clock = VirtualClock(start=0.0)
     _, proxy = make(clock)

@@ -220,3 +220,27 @@ def test_compiled_caster_agrees_with_brute_force(monkeypatch: pytest.MonkeyPatch
     np.testing.assert_array_equal(fast, slow)
     np.testing.assert_array_equal(np.isnan(fast), np.isnan(expected))
     np.testing.assert_allclose(fast, expected, atol=0.01)
+
+
+@compiled
+def test_compiled_caster_normalises_as_the_numpy_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the kernel normalises the directions itself (decision 0030): lengths from 1e-3 to
+    # 1e3, and directions whose three squares round differently by the order of the sum
+    spec = load_world(WORLDS / "rock-field.xml")
+    terrain = Terrain.from_spec(spec.terrain, spec.obstacles)
+    rng = np.random.default_rng(11)
+    for _ in range(40):
+        directions = _random_directions(rng, 361) * rng.choice([1e-3, 0.7, 1.0, 3.0, 1e3],
+                                                               size=(361, 1))
+        directions *= rng.uniform(0.999, 1.001, size=(361, 3))  # not exactly unit
+        origin = np.array([rng.uniform(-20, 20), rng.uniform(-20, 20), rng.uniform(0.5, 2.0)])
+        fast, slow = _both(monkeypatch, cast_rays, terrain, origin, directions, 8.183)
+        np.testing.assert_array_equal(fast, slow)
+    for bad in ([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]], [[np.nan, 0.0, 1.0]]):
+        with pytest.raises(ValueError, match="non-zero"):
+            cast_rays(terrain, [0, 0, 1], bad, 8.0)
+        monkeypatch.setattr(raycast, "KERNEL", None)
+        with pytest.raises(ValueError, match="non-zero"):
+            cast_rays(terrain, [0, 0, 1], bad, 8.0)
+        monkeypatch.undo()
+

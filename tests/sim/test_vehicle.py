@@ -14,6 +14,7 @@ from afa.sim import (
     TerrainSpec,
     Vehicle,
     VehicleParameters,
+    VehicleState,
 )
 
 L, W = 1.9, 1.3
@@ -241,3 +242,19 @@ def test_bad_step_arguments() -> None:
         vehicle.step(0.1, math.nan, 0.0)
     with pytest.raises(ValueError):
         VehicleParameters(wheelbase=0.0)
+
+
+def test_transform_is_rotation_and_position_bit_for_bit() -> None:
+    # transform() writes rotation()'s expressions out in one array (decision 0030): the
+    # same bits as the rotation and the position set into an identity
+    rng = np.random.default_rng(4)
+    for _ in range(500):
+        state = VehicleState(east=rng.uniform(-500, 500), north=rng.uniform(-500, 500),
+                             up=rng.uniform(-5, 5), yaw=rng.uniform(-4, 4),
+                             roll=rng.uniform(-0.5, 0.5), pitch=rng.uniform(-0.5, 0.5))
+        expected = np.eye(4)
+        expected[:3, :3] = state.rotation()
+        expected[:3, 3] = state.position
+        transform = state.transform()
+        assert transform.dtype == np.float64 and transform.shape == (4, 4)
+        assert transform.tobytes() == expected.tobytes()
