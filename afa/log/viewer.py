@@ -270,7 +270,7 @@ def _string_json(text: str) -> str:
 def _base64(array: np.ndarray) -> bytes:
     """The bytes of a C-contiguous array in base64, without a newline (binascii reads
     the array's buffer: no intermediate bytes or str)."""
-    return binascii.b2a_base64(array, newline=False)
+    return binascii.b2a_base64(array.data, newline=False)
 
 
 _CLOUD_MIDDLE = (',"pose":' + json.dumps(_IDENTITY_POSE, separators=(",", ":"))
@@ -435,7 +435,7 @@ class ViewerConverter:
         """:meth:`convert` as JSON bytes, what the recorder writes: the same documents,
         with votes, point clouds and maps encoded the fast way (``*_json``)."""
         kind = type(body)
-        if kind is ArcVoteIDL:
+        if type(body) is ArcVoteIDL:
             if not self._due(event_type, origin, body):
                 return []
             return [(viewer_topic(event_type), "foxglove.SceneUpdate", arc_votes_json(body))]

@@ -1,0 +1,250 @@
+"""A chunked, indexed MCAP writer for the recorder (decision 0028).
+
+The ``mcap`` package's writer builds a ``Message`` object and writes each of its fields
+through a stream per message (about 14 µs each, 10 000 messages per 30 simulated
+seconds) and compresses every chunk at zstd's default level 3. This writer packs a
+message's record with one ``struct`` call into the open chunk's ``bytearray``, keeps the
+message index as arrays of integers, and compresses with one reusable zstd context at a
+level of the caller's choice (afa records at level 2: on a recording's chunks about 20 %
+less compression time than level 3 for 1 % more bytes; level 1 saves no more time and
+costs 15 % more bytes on the afa events; :data:`ZSTD_LEVEL`).
+
+It writes what the MCAP specification (https://mcap.dev/spec) describes and the ``mcap``
+package's readers read (a test reads its files with them, CRCs checked): magic, header,
+chunks (schemas and channels in the chunk open when they are registered, then
+messages), a message index per channel after each chunk, metadata records, data end
+with the data section's CRC, and the summary (schemas, channels, statistics, chunk
+indexes, metadata indexes, summary offsets) before the footer. Only what the recorder
+uses is supported: no attachments, always chunked.
+"""
+
+from __future__ import annotations
+
+import struct
+import sys
+import zlib
+from array import array
+from collections.abc import Mapping
+from typing import IO, Any
+
+__all__ = ["McapWriter", "MAGIC", "COMPRESSIONS", "ZSTD_LEVEL"]
+
+MAGIC = b"\x89MCAP0\r\n"
+COMPRESSIONS = ("zstd", "lz4", "none")
+#: The zstd level afa records at (the ``mcap`` package's writer uses 3).
+ZSTD_LEVEL = 2
+
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
+_OP_CHUNK, _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX = 0x06, 0x07, 0x08
+_OP_STATISTICS, _OP_METADATA, _OP_METADATA_INDEX = 0x0B, 0x0C, 0x0D
+_OP_SUMMARY_OFFSET, _OP_DATA_END = 0x0E, 0x0F
+
+_RECORD = struct.Struct("<BQ")
+# opcode, record length, channel id, sequence, log time, publish time
+_MESSAGE = struct.Struct("<BQHIQQ")
+_MESSAGE_FIXED = _MESSAGE.size - _RECORD.size
+_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
+
+
+if array("Q").itemsize != 8:  # pragma: no cover - no such platform in use
+    raise ImportError("afa.log.writer needs 8-byte unsigned longs in array('Q')")
+
+
+def _string(text: str) -> bytes:
+    data = text.encode()
+    return _U32.pack(len(data)) + data
+
+
+def _map(entries: Mapping[str, str]) -> bytes:
+    body = b"".join(_string(k) + _string(v) for k, v in entries.items())
+    return _U32.pack(len(body)) + body
+
+
+def _record(opcode: int, content: bytes) -> bytes:
+    return _RECORD.pack(opcode, len(content)) + content
+
+
+class McapWriter:
+    """Writes an MCAP file to ``stream`` (a binary file open for writing).
+
+    ``compression``: ``zstd``, ``lz4`` or ``none``; ``level``: the zstd level;
+    ``chunk_size``: a chunk is finished once its records pass this many bytes (and at
+    each :meth:`flush`). Raises ValueError for an unknown compression.
+    """
+
+    def __init__(self, stream: IO[bytes], *, compression: str = "zstd",
+                 level: int = ZSTD_LEVEL, chunk_size: int = 1 << 20) -> None:
+        if compression not in COMPRESSIONS:
+            raise ValueError(f"unknown compression {compression!r}")
+        self._stream = stream
+        self._compression = "" if compression == "none" else compression
+        self._compress: Any = None
+        if compression == "zstd":
+            import zstandard
+
+            self._compress = zstandard.ZstdCompressor(level=level).compress
+        elif compression == "lz4":
+            import lz4.frame
+
+            self._compress = lz4.frame.compress
+        self._chunk_size = chunk_size
+        self._position = 0
+        self._crc = 0  # of the data section, magic included
+        self._schemas: dict[int, bytes] = {}  # id -> record
+        self._channels: dict[int, bytes] = {}
+        self._counts: dict[int, int] = {}
+        self._chunk_indexes: list[bytes] = []
+        self._metadata_indexes: list[bytes] = []
+        self._message_count = 0
+        self._start_time: int | None = None
+        self._end_time = 0
+        self._chunk = bytearray()
+        self._chunk_start = 0
+        self._chunk_end = 0
+        self._chunk_messages = 0
+        # channel -> [log time, offset, ...] (array "Q": 8 bytes on every platform numpy
+        # runs on; checked below)
+        self._index: dict[int, array[int]] = {}
+        self._finished = False
+
+    # -- low level -----------------------------------------------------------------------
+    def _write(self, data: bytes | bytearray) -> None:
+        self._stream.write(data)
+        self._crc = zlib.crc32(data, self._crc)
+        self._position += len(data)
+
+    # -- the API the recorder uses ----------------------------------------------------------
+    def start(self, profile: str, library: str) -> None:
+        self._write(MAGIC)
+        self._write(_record(_OP_HEADER, _string(profile) + _string(library)))
+
+    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        schema_id = len(self._schemas) + 1
+        record = _record(_OP_SCHEMA, _U16.pack(schema_id) + _string(name) + _string(encoding)
+                         + _U32.pack(len(data)) + data)
+        self._schemas[schema_id] = record
+        self._chunk += record
+        return schema_id
+
+    def register_channel(self, topic: str, message_encoding: str, schema_id: int,
+                         metadata: Mapping[str, str] | None = None) -> int:
+        channel_id = len(self._channels) + 1
+        record = _record(_OP_CHANNEL, _U16.pack(channel_id) + _U16.pack(schema_id)
+                         + _string(topic) + _string(message_encoding)
+                         + _map(metadata or {}))
+        self._channels[channel_id] = record
+        self._counts[channel_id] = 0
+        self._chunk += record
+        return channel_id
+
+    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
+                    sequence: int = 0) -> None:
+        chunk = self._chunk
+        if self._chunk_messages == 0:
+            self._chunk_start = self._chunk_end = log_time
+        elif log_time < self._chunk_start:
+            self._chunk_start = log_time
+        elif log_time > self._chunk_end:
+            self._chunk_end = log_time
+        index = self._index.get(channel_id)
+        if index is None:
+            index = self._index[channel_id] = array("Q")
+        index.append(log_time)
+        index.append(len(chunk))
+        chunk += _MESSAGE.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id, sequence,
+                               log_time, publish_time)
+        chunk += data
+        self._chunk_messages += 1
+        self._counts[channel_id] += 1
+        if len(chunk) > self._chunk_size:
+            self._finish_chunk()
+
+    def add_metadata(self, name: str, metadata: Mapping[str, str]) -> None:
+        self._finish_chunk()  # a metadata record stands between chunks
+        offset = self._position
+        record = _record(_OP_METADATA, _string(name) + _map(metadata))
+        self._write(record)
+        self._metadata_indexes.append(_record(
+            _OP_METADATA_INDEX, _U64.pack(offset) + _U64.pack(len(record)) + _string(name)))
+
+    def flush(self) -> None:
+        """Finish the open chunk and hand everything to the operating system."""
+        self._finish_chunk()
+        self._stream.flush()
+
+    def finish(self) -> None:
+        """The last chunk, data end, summary and footer. Idempotent."""
+        if self._finished:
+            return
+        self._finish_chunk()
+        self._finished = True
+        self._write(_record(_OP_DATA_END, _U32.pack(self._crc)))
+        summary_start = self._position
+        summary = bytearray()
+        groups: list[tuple[int, int, int]] = []
+
+        def group(opcode: int, records: list[bytes]) -> None:
+            if records:
+                groups.append((opcode, summary_start + len(summary),
+                               sum(map(len, records))))
+                for record in records:
+                    summary.extend(record)
+
+        group(_OP_SCHEMA, list(self._schemas.values()))
+        group(_OP_CHANNEL, list(self._channels.values()))
+        counts = b"".join(_U16.pack(c) + _U64.pack(n) for c, n in self._counts.items())
+        group(_OP_STATISTICS, [_record(_OP_STATISTICS, struct.pack(
+            "<QHIIIIQQ", self._message_count, len(self._schemas), len(self._channels), 0,
+            len(self._metadata_indexes), len(self._chunk_indexes),
+            self._start_time or 0, self._end_time) + _U32.pack(len(counts)) + counts)])
+        group(_OP_CHUNK_INDEX, self._chunk_indexes)
+        group(_OP_METADATA_INDEX, self._metadata_indexes)
+        offsets_start = summary_start + len(summary)
+        for opcode, start, length in groups:
+            summary.extend(_record(_OP_SUMMARY_OFFSET, struct.pack("<BQQ", opcode, start,
+                                                                   length)))
+        footer_head = _RECORD.pack(_OP_FOOTER, 20) + struct.pack("<QQ", summary_start,
+                                                                 offsets_start)
+        summary.extend(footer_head)
+        crc = zlib.crc32(summary)
+        self._write(summary + _U32.pack(crc) + MAGIC)
+        self._stream.flush()
+
+    # -- chunks ------------------------------------------------------------------------------
+    def _finish_chunk(self) -> None:
+        records = self._chunk
+        if not records:
+            return
+        if self._chunk_messages == 0:
+            return  # schemas and channels alone wait for the chunk of their first message
+        data = records
+        compressed = self._compress(data) if self._compress is not None else data
+        start, end = self._chunk_start, self._chunk_end
+        content_head = struct.pack("<QQQI", start, end, len(data), zlib.crc32(data)) \
+            + _string(self._compression) + _U64.pack(len(compressed))
+        chunk_offset = self._position
+        head = _RECORD.pack(_OP_CHUNK, len(content_head) + len(compressed)) + content_head
+        self._write(head)
+        self._write(compressed)
+        chunk_length = len(head) + len(compressed)
+        index_offsets = bytearray()
+        index_start = self._position
+        for channel_id, entries in self._index.items():
+            index_offsets += _U16.pack(channel_id) + _U64.pack(self._position)
+            if sys.byteorder != "little":
+                entries.byteswap()
+            body = entries.tobytes()
+            self._write(_RECORD.pack(_OP_MESSAGE_INDEX, 6 + len(body))
+                        + _U16.pack(channel_id) + _U32.pack(len(body)) + body)
+        self._chunk_indexes.append(_record(_OP_CHUNK_INDEX, struct.pack(
+            "<QQQQ", start, end, chunk_offset, chunk_length)
+            + _U32.pack(len(index_offsets)) + bytes(index_offsets)
+            + _U64.pack(self._position - index_start) + _string(self._compression)
+            + _U64.pack(len(compressed)) + _U64.pack(len(data))))
+        self._message_count += self._chunk_messages
+        if self._start_time is None or start < self._start_time:
+            self._start_time = start
+        self._end_time = max(self._end_time, end)
+        self._chunk = bytearray()
+        self._chunk_messages = 0
+        self._index = {}
