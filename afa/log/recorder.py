@@ -54,6 +54,10 @@ __all__ = ["Recorder", "COMPRESSIONS", "load_mcap"]
 
 log = logging.getLogger("afa.log")
 
+#: The chunk group of the viewer channels (:class:`afa.log.writer.McapWriter`): their
+#: messages are half a recording's bytes and a replay never reads them, so they get
+#: chunks of their own that a replay or a seek skips without decompressing.
+VIEWER_GROUP = 1
 #: How often the geometry model's transforms are written again (s of clock time), so a
 #: viewer that opens the file in the middle finds them.
 STATIC_TF_PERIOD = 10.0
@@ -308,7 +312,8 @@ class Recorder:
                 schema = self._schemas[schema_name] = self._writer.register_schema(
                     schema_name, fmt.SCHEMA_ENCODING, json.dumps(SCHEMAS[schema_name]).encode())
             channel = self._channels[key] = self._writer.register_channel(
-                topic, fmt.JSON_ENCODING, schema, {fmt.KIND: fmt.VIEWER})
+                topic, fmt.JSON_ENCODING, schema, {fmt.KIND: fmt.VIEWER},
+                group=VIEWER_GROUP)
         data = message if isinstance(message, bytes) else dumps(message)
         self._writer.add_message(channel, nanoseconds, data, nanoseconds)
         self.viewer_written += 1

@@ -64,12 +64,35 @@ def _record(opcode: int, content: bytes) -> bytes:
     return _RECORD.pack(opcode, len(content)) + content
 
 
+class _OpenChunk:
+    """The records of a chunk being built, with its time range and message index."""
+
+    __slots__ = ("records", "start", "end", "messages", "index", "schemas")
+
+    def __init__(self) -> None:
+        self.records = bytearray()
+        self.start = self.end = 0
+        self.messages = 0
+        # channel -> [log time, offset, log time, offset, ...]
+        self.index: dict[int, array[int]] = {}
+        self.schemas: set[int] = set()  # schema records written into this group's chunks
+
+
 class McapWriter:
     """Writes an MCAP file to ``stream`` (a binary file open for writing).
 
     ``compression``: ``zstd``, ``lz4`` or ``none``; ``level``: the zstd level;
     ``chunk_size``: a chunk is finished once its records pass this many bytes (and at
     each :meth:`flush`). Raises ValueError for an unknown compression.
+
+    **Chunk groups.** A channel belongs to a group (``register_channel(group=...)``) and
+    each group has its own open chunk, so the messages of different groups never share
+    a chunk: the recorder puts the viewer channels in a group of their own, and a replay,
+    which reads only the afa channels, skips their chunks (half a recording's bytes)
+    without decompressing them. Chunks of different groups overlap in time, which MCAP
+    allows (readers merge chunks by time). A schema record is written into the chunk of
+    each group whose channel uses it first, so a linear reader meets it before the
+    channel wherever it starts reading.
     """
 
     def __init__(self, stream: IO[bytes], *, compression: str = "zstd",
@@ -98,13 +121,8 @@ class McapWriter:
         self._message_count = 0
         self._start_time: int | None = None
         self._end_time = 0
-        self._chunk = bytearray()
-        self._chunk_start = 0
-        self._chunk_end = 0
-        self._chunk_messages = 0
-        # channel -> [log time, offset, ...] (array "Q": 8 bytes on every platform numpy
-        # runs on; checked below)
-        self._index: dict[int, array[int]] = {}
+        self._groups: dict[int, _OpenChunk] = {}
+        self._chunk_of: dict[int, _OpenChunk] = {}  # channel -> its group's open chunk
         self._finished = False
 
     # -- low level -----------------------------------------------------------------------
@@ -119,48 +137,59 @@ class McapWriter:
         self._write(_record(_OP_HEADER, _string(profile) + _string(library)))
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        """A schema's id (written with the first channel that uses it)."""
         schema_id = len(self._schemas) + 1
-        record = _record(_OP_SCHEMA, _U16.pack(schema_id) + _string(name) + _string(encoding)
-                         + _U32.pack(len(data)) + data)
-        self._schemas[schema_id] = record
-        self._chunk += record
+        self._schemas[schema_id] = _record(
+            _OP_SCHEMA, _U16.pack(schema_id) + _string(name) + _string(encoding)
+            + _U32.pack(len(data)) + data)
         return schema_id
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int,
-                         metadata: Mapping[str, str] | None = None) -> int:
+                         metadata: Mapping[str, str] | None = None, *, group: int = 0) -> int:
+        """A channel's id; ``schema_id`` 0 for none; ``group``: its chunk group."""
+        if schema_id and schema_id not in self._schemas:
+            raise ValueError(f"unknown schema id {schema_id}")
         channel_id = len(self._channels) + 1
         record = _record(_OP_CHANNEL, _U16.pack(channel_id) + _U16.pack(schema_id)
                          + _string(topic) + _string(message_encoding)
                          + _map(metadata or {}))
         self._channels[channel_id] = record
         self._counts[channel_id] = 0
-        self._chunk += record
+        chunk = self._groups.get(group)
+        if chunk is None:
+            chunk = self._groups[group] = _OpenChunk()
+        if schema_id and schema_id not in chunk.schemas:
+            chunk.schemas.add(schema_id)
+            chunk.records += self._schemas[schema_id]
+        chunk.records += record
+        self._chunk_of[channel_id] = chunk
         return channel_id
 
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
                     sequence: int = 0) -> None:
-        chunk = self._chunk
-        if self._chunk_messages == 0:
-            self._chunk_start = self._chunk_end = log_time
-        elif log_time < self._chunk_start:
-            self._chunk_start = log_time
-        elif log_time > self._chunk_end:
-            self._chunk_end = log_time
-        index = self._index.get(channel_id)
+        chunk = self._chunk_of[channel_id]
+        records = chunk.records
+        if chunk.messages == 0:
+            chunk.start = chunk.end = log_time
+        elif log_time < chunk.start:
+            chunk.start = log_time
+        elif log_time > chunk.end:
+            chunk.end = log_time
+        index = chunk.index.get(channel_id)
         if index is None:
-            index = self._index[channel_id] = array("Q")
+            index = chunk.index[channel_id] = array("Q")
         index.append(log_time)
-        index.append(len(chunk))
-        chunk += _MESSAGE.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id, sequence,
-                               log_time, publish_time)
-        chunk += data
-        self._chunk_messages += 1
+        index.append(len(records))
+        records += _MESSAGE.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id,
+                                 sequence, log_time, publish_time)
+        records += data
+        chunk.messages += 1
         self._counts[channel_id] += 1
-        if len(chunk) > self._chunk_size:
-            self._finish_chunk()
+        if len(records) > self._chunk_size:
+            self._finish_chunk(chunk)
 
     def add_metadata(self, name: str, metadata: Mapping[str, str]) -> None:
-        self._finish_chunk()  # a metadata record stands between chunks
+        self._finish_chunks()  # a metadata record stands between chunks
         offset = self._position
         record = _record(_OP_METADATA, _string(name) + _map(metadata))
         self._write(record)
@@ -168,15 +197,15 @@ class McapWriter:
             _OP_METADATA_INDEX, _U64.pack(offset) + _U64.pack(len(record)) + _string(name)))
 
     def flush(self) -> None:
-        """Finish the open chunk and hand everything to the operating system."""
-        self._finish_chunk()
+        """Finish the open chunks and hand everything to the operating system."""
+        self._finish_chunks()
         self._stream.flush()
 
     def finish(self) -> None:
         """The last chunk, data end, summary and footer. Idempotent."""
         if self._finished:
             return
-        self._finish_chunk()
+        self._finish_chunks()
         self._finished = True
         self._write(_record(_OP_DATA_END, _U32.pack(self._crc)))
         summary_start = self._position
@@ -211,15 +240,16 @@ class McapWriter:
         self._stream.flush()
 
     # -- chunks ------------------------------------------------------------------------------
-    def _finish_chunk(self) -> None:
-        records = self._chunk
-        if not records:
-            return
-        if self._chunk_messages == 0:
+    def _finish_chunks(self) -> None:
+        for chunk in self._groups.values():
+            self._finish_chunk(chunk)
+
+    def _finish_chunk(self, chunk: _OpenChunk) -> None:
+        if chunk.messages == 0:
             return  # schemas and channels alone wait for the chunk of their first message
-        data = records
+        data = chunk.records
         compressed = self._compress(data) if self._compress is not None else data
-        start, end = self._chunk_start, self._chunk_end
+        start, end = chunk.start, chunk.end
         content_head = struct.pack("<QQQI", start, end, len(data), zlib.crc32(data)) \
             + _string(self._compression) + _U64.pack(len(compressed))
         chunk_offset = self._position
@@ -229,7 +259,7 @@ class McapWriter:
         chunk_length = len(head) + len(compressed)
         index_offsets = bytearray()
         index_start = self._position
-        for channel_id, entries in self._index.items():
+        for channel_id, entries in chunk.index.items():
             index_offsets += _U16.pack(channel_id) + _U64.pack(self._position)
             if sys.byteorder != "little":
                 entries.byteswap()
@@ -241,10 +271,10 @@ class McapWriter:
             + _U32.pack(len(index_offsets)) + bytes(index_offsets)
             + _U64.pack(self._position - index_start) + _string(self._compression)
             + _U64.pack(len(compressed)) + _U64.pack(len(data))))
-        self._message_count += self._chunk_messages
+        self._message_count += chunk.messages
         if self._start_time is None or start < self._start_time:
             self._start_time = start
         self._end_time = max(self._end_time, end)
-        self._chunk = bytearray()
-        self._chunk_messages = 0
-        self._index = {}
+        chunk.records = bytearray()
+        chunk.messages = 0
+        chunk.index = {}

@@ -17,7 +17,8 @@ from afa.log.writer import MAGIC, McapWriter
 
 
 def write_sample(compression: str, chunk_size: int = 600) -> tuple[bytes, list[tuple], int]:
-    """A file of two schemas, three channels (one schemaless, one registered late),
+    """A file of two schemas, three channels (one schemaless, one registered late, one
+    in a chunk group of its own),
     messages over several chunks with times out of order within a chunk, metadata
     between chunks; returns its bytes, the messages as (topic, log_time, data, seq) and
     how many of them were written before the explicit flush."""
@@ -28,7 +29,7 @@ def write_sample(compression: str, chunk_size: int = 600) -> tuple[bytes, list[t
     second = writer.register_schema("foxglove.Grid", "jsonschema", b"{}")
     a = writer.register_channel("/Raptor/A", "afa-event", first, {"afa.kind": "event",
                                                                   "k\u00e9y": "v"})
-    b = writer.register_channel("/viz/B", "json", second)
+    b = writer.register_channel("/viz/B", "json", second, group=1)
     sent = []
     writer.add_metadata("afa", {"version": "x", "seed": "3"})
     for k in range(40):
@@ -51,20 +52,26 @@ def write_sample(compression: str, chunk_size: int = 600) -> tuple[bytes, list[t
     return stream.getvalue(), sent, flushed
 
 
+def in_order(messages):
+    """By time, and messages of one time (in chunks of different groups, read in either
+    order) by topic and sequence."""
+    return sorted(messages, key=lambda m: (m[1], m[0], m[3]))
+
+
 @pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
 def test_the_mcap_readers_read_back_every_message_with_crcs_checked(compression):
     data, sent, _ = write_sample(compression)
     assert data.startswith(MAGIC) and data.endswith(MAGIC)
-    expected = sorted(sent, key=lambda m: m[1])
+    expected = in_order(sent)
 
     def read(reader):
         return [(channel.topic, message.log_time, message.data, message.sequence)
                 for _, channel, message in reader.iter_messages(log_time_order=True)]
 
     seeking = SeekingReader(io.BytesIO(data), validate_crcs=True)
-    assert sorted(read(seeking), key=lambda m: m[1]) == expected
+    assert in_order(read(seeking)) == expected
     linear = NonSeekingReader(io.BytesIO(data), validate_crcs=True)
-    assert sorted(read(linear), key=lambda m: (m[1])) == expected
+    assert in_order(read(linear)) == expected
 
     summary = seeking.get_summary()
     stats = summary.statistics
@@ -127,14 +134,43 @@ def test_afa_reads_it_through_the_index_and_cut_off_up_to_its_last_flush(tmp_pat
     with LogReader(path) as reader:
         assert reader.indexed and not reader.problems
         got = [(m.channel.topic, m.log_time, m.data, m.sequence) for m in reader.messages()]
-    assert got == sorted(sent, key=lambda m: m[1])
-    # cut inside the second (last) chunk: the flushed one is read by a scan
+    assert [m[1] for m in got] == sorted(m[1] for m in got)  # in time order
+    assert in_order(got) == in_order(sent)
+    # cut inside the first chunk after the flush: the flushed ones (one per group) are
+    # read by a scan
     indexes = sorted(SeekingReader(io.BytesIO(data)).get_summary().chunk_indexes,
                      key=lambda i: i.chunk_start_offset)
-    assert len(indexes) == 2
+    assert len(indexes) == 4
     cut = tmp_path / "cut.mcap"
-    cut.write_bytes(data[:indexes[1].chunk_start_offset + 50])
+    cut.write_bytes(data[:indexes[2].chunk_start_offset + 50])
     with LogReader(cut) as reader:
         assert not reader.indexed and reader.problems
         got = [(m.channel.topic, m.log_time, m.data, m.sequence) for m in reader.messages()]
-    assert got == sorted(sent[:flushed], key=lambda m: m[1])
+    assert [m[1] for m in got] == sorted(m[1] for m in got)
+    assert in_order(got) == in_order(sent[:flushed])
+
+
+def test_a_chunk_holds_the_channels_of_one_group_and_a_reader_skips_the_others(tmp_path):
+    data, sent, _ = write_sample("zstd")
+    summary = SeekingReader(io.BytesIO(data)).get_summary()
+    by_topic = {c.topic: c.id for c in summary.channels.values()}
+    viewer = by_topic["/viz/B"]
+    groups = [set(i.message_index_offsets) for i in summary.chunk_indexes]
+    assert all(g == {viewer} or viewer not in g for g in groups)
+    assert {viewer} in groups and any(viewer not in g for g in groups)
+    # chunks of the two groups overlap in time: readers merge them
+    viewer_chunks = [i for i in summary.chunk_indexes if viewer in i.message_index_offsets]
+    other = [i for i in summary.chunk_indexes if viewer not in i.message_index_offsets]
+    assert any(v.message_start_time < o.message_end_time and
+               o.message_start_time < v.message_end_time for v in viewer_chunks for o in other)
+    path = tmp_path / "groups.mcap"
+    path.write_bytes(data)
+    with LogReader(path) as reader:
+        loaded = []
+        load = reader._load
+        reader._load = lambda ref, wanted=None: loaded.append(ref.offset) or load(ref, wanted)
+        got = [(m.channel.topic, m.log_time, m.data, m.sequence)
+               for m in reader.messages(channels=[by_topic["/Raptor/A"]])]
+    assert got == in_order(m for m in sent if m[0] == "/Raptor/A")
+    assert set(loaded) == {i.chunk_start_offset for i in other
+                           if by_topic["/Raptor/A"] in i.message_index_offsets}
