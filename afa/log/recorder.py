@@ -78,7 +78,8 @@ class Recorder:
 
     ``events``: event-name patterns to record (``*``, ``?``, ``[...]``; None: all).
     ``compression``: ``zstd`` (default), ``lz4`` or ``none``; ``level``: the zstd level
-    (:data:`afa.log.writer.ZSTD_LEVEL`, 2: decision 0028). ``viewer``: also write the
+    (:data:`afa.log.writer.ZSTD_LEVEL`, 2: decision 0028); ``threaded``: compress chunks
+    in a worker thread, off the event loop (decision 0028). ``viewer``: also write the
     Foxglove channels. ``maxsize``: the observer's buffer (events); ``poll_buffer``: the
     poll records' buffer. ``on_flush(count)`` is told the number of events on disk after
     each flush.
@@ -89,7 +90,7 @@ class Recorder:
 
     def __init__(self, path: str | Path, *, events: Iterable[str] | None = None,
                  compression: str = "zstd", level: int = ZSTD_LEVEL,
-                 chunk_size: int = 1 << 20, viewer: bool = True,
+                 chunk_size: int = 1 << 20, threaded: bool = True, viewer: bool = True,
                  flush_period: float = 1.0, maxsize: int = 1 << 16, poll_buffer: int = 4096,
                  on_flush: Callable[[int], None] | None = None) -> None:
         if compression not in COMPRESSIONS:
@@ -101,6 +102,7 @@ class Recorder:
         self.patterns = None if events is None else [p for p in events if p]
         self.compression = compression
         self.level = level
+        self.threaded = threaded
         self.chunk_size = chunk_size
         self.viewer = viewer
         self.flush_period = flush_period
@@ -148,7 +150,8 @@ class Recorder:
         except OSError as exc:
             raise AfaError(f"cannot record to {self.path}: {exc.strerror or exc}") from exc
         self._writer = McapWriter(self._file, compression=self.compression,
-                                  level=self.level, chunk_size=self.chunk_size)
+                                  level=self.level, chunk_size=self.chunk_size,
+                                  threaded=self.threaded)
         from afa import __version__
 
         self._writer.start(profile=fmt.PROFILE, library=f"afa {__version__}")

@@ -24,8 +24,10 @@ import struct
 import sys
 import zlib
 from array import array
+from collections import deque
 from collections.abc import Mapping
-from typing import IO, Any
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import IO, Any, NamedTuple
 
 __all__ = ["McapWriter", "MAGIC", "COMPRESSIONS", "ZSTD_LEVEL"]
 
@@ -78,12 +80,26 @@ class _OpenChunk:
         self.schemas: set[int] = set()  # schema records written into this group's chunks
 
 
+class _Sealed(NamedTuple):
+    """A finished chunk waiting to be written."""
+
+    records: bytearray
+    start: int
+    end: int
+    messages: int
+    message_index: dict[int, array[int]]
+
+
 class McapWriter:
     """Writes an MCAP file to ``stream`` (a binary file open for writing).
 
     ``compression``: ``zstd``, ``lz4`` or ``none``; ``level``: the zstd level;
     ``chunk_size``: a chunk is finished once its records pass this many bytes (and at
-    each :meth:`flush`). Raises ValueError for an unknown compression.
+    each :meth:`flush`). ``threaded``: compress finished chunks in a worker thread while
+    the caller goes on (they are written in order as they come back; :meth:`flush`,
+    :meth:`add_metadata` and :meth:`finish` wait for all of them): on a machine with a
+    free core the caller does not wait for compression; the work is the same. Raises
+    ValueError for an unknown compression.
 
     **Chunk groups.** A channel belongs to a group (``register_channel(group=...)``) and
     each group has its own open chunk, so the messages of different groups never share
@@ -96,7 +112,8 @@ class McapWriter:
     """
 
     def __init__(self, stream: IO[bytes], *, compression: str = "zstd",
-                 level: int = ZSTD_LEVEL, chunk_size: int = 1 << 20) -> None:
+                 level: int = ZSTD_LEVEL, chunk_size: int = 1 << 20,
+                 threaded: bool = False) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"unknown compression {compression!r}")
         self._stream = stream
@@ -124,6 +141,8 @@ class McapWriter:
         self._groups: dict[int, _OpenChunk] = {}
         self._chunk_of: dict[int, _OpenChunk] = {}  # channel -> its group's open chunk
         self._finished = False
+        self._worker = ThreadPoolExecutor(1, "mcap-compress") if threaded else None
+        self._pending: deque[tuple[_Sealed, Future[tuple[bytes | bytearray, int]]]] = deque()
 
     # -- low level -----------------------------------------------------------------------
     def _write(self, data: bytes | bytearray) -> None:
@@ -207,6 +226,8 @@ class McapWriter:
             return
         self._finish_chunks()
         self._finished = True
+        if self._worker is not None:
+            self._worker.shutdown()
         self._write(_record(_OP_DATA_END, _U32.pack(self._crc)))
         summary_start = self._position
         summary = bytearray()
@@ -241,16 +262,41 @@ class McapWriter:
 
     # -- chunks ------------------------------------------------------------------------------
     def _finish_chunks(self) -> None:
+        """Finish every open chunk and write every chunk finished so far."""
         for chunk in self._groups.values():
             self._finish_chunk(chunk)
+        self._write_ready(wait=True)
 
     def _finish_chunk(self, chunk: _OpenChunk) -> None:
         if chunk.messages == 0:
             return  # schemas and channels alone wait for the chunk of their first message
-        data = chunk.records
+        sealed = _Sealed(chunk.records, chunk.start, chunk.end, chunk.messages, chunk.index)
+        chunk.records = bytearray()  # the sealed records are never touched again
+        chunk.messages = 0
+        chunk.index = {}
+        if self._worker is None:
+            self._write_chunk(sealed, *self._pack(sealed.records))
+            return
+        self._pending.append((sealed, self._worker.submit(self._pack, sealed.records)))
+        self._write_ready(wait=False)
+
+    def _pack(self, data: bytearray) -> tuple[bytes | bytearray, int]:
+        """A chunk's records compressed, and their CRC (in the worker thread if any:
+        zstandard, lz4 and zlib release the GIL on large buffers)."""
         compressed = self._compress(data) if self._compress is not None else data
-        start, end = chunk.start, chunk.end
-        content_head = struct.pack("<QQQI", start, end, len(data), zlib.crc32(data)) \
+        return compressed, zlib.crc32(data)
+
+    def _write_ready(self, *, wait: bool) -> None:
+        """Write the compressed chunks, in the order they were finished: those done
+        (``wait``: all of them)."""
+        pending = self._pending
+        while pending and (wait or pending[0][1].done()):
+            sealed, future = pending.popleft()
+            self._write_chunk(sealed, *future.result())
+
+    def _write_chunk(self, sealed: _Sealed, compressed: bytes | bytearray, crc: int) -> None:
+        data, start, end = sealed.records, sealed.start, sealed.end
+        content_head = struct.pack("<QQQI", start, end, len(data), crc) \
             + _string(self._compression) + _U64.pack(len(compressed))
         chunk_offset = self._position
         head = _RECORD.pack(_OP_CHUNK, len(content_head) + len(compressed)) + content_head
@@ -259,7 +305,7 @@ class McapWriter:
         chunk_length = len(head) + len(compressed)
         index_offsets = bytearray()
         index_start = self._position
-        for channel_id, entries in chunk.index.items():
+        for channel_id, entries in sealed.message_index.items():
             index_offsets += _U16.pack(channel_id) + _U64.pack(self._position)
             if sys.byteorder != "little":
                 entries.byteswap()
@@ -271,10 +317,7 @@ class McapWriter:
             + _U32.pack(len(index_offsets)) + bytes(index_offsets)
             + _U64.pack(self._position - index_start) + _string(self._compression)
             + _U64.pack(len(compressed)) + _U64.pack(len(data))))
-        self._message_count += chunk.messages
+        self._message_count += sealed.messages
         if self._start_time is None or start < self._start_time:
             self._start_time = start
         self._end_time = max(self._end_time, end)
-        chunk.records = bytearray()
-        chunk.messages = 0
-        chunk.index = {}

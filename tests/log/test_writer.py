@@ -16,14 +16,16 @@ from afa.log import LogReader
 from afa.log.writer import MAGIC, McapWriter
 
 
-def write_sample(compression: str, chunk_size: int = 600) -> tuple[bytes, list[tuple], int]:
+def write_sample(compression: str, chunk_size: int = 600, threaded: bool = False
+                 ) -> tuple[bytes, list[tuple], int]:
     """A file of two schemas, three channels (one schemaless, one registered late, one
     in a chunk group of its own),
     messages over several chunks with times out of order within a chunk, metadata
     between chunks; returns its bytes, the messages as (topic, log_time, data, seq) and
     how many of them were written before the explicit flush."""
     stream = io.BytesIO()
-    writer = McapWriter(stream, compression=compression, chunk_size=chunk_size)
+    writer = McapWriter(stream, compression=compression, chunk_size=chunk_size,
+                        threaded=threaded)
     writer.start(profile="afa", library="test 1")
     first = writer.register_schema("idl.A@1", "jsonschema", b'{"type":"object"}')
     second = writer.register_schema("foxglove.Grid", "jsonschema", b"{}")
@@ -61,6 +63,8 @@ def in_order(messages):
 @pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
 def test_the_mcap_readers_read_back_every_message_with_crcs_checked(compression):
     data, sent, _ = write_sample(compression)
+    # compressing in a worker thread writes the same file, byte for byte
+    assert write_sample(compression, threaded=True)[0] == data
     assert data.startswith(MAGIC) and data.endswith(MAGIC)
     expected = in_order(sent)
 
@@ -128,7 +132,8 @@ def test_the_mcap_readers_read_back_every_message_with_crcs_checked(compression)
 
 
 def test_afa_reads_it_through_the_index_and_cut_off_up_to_its_last_flush(tmp_path):
-    data, sent, flushed = write_sample("zstd", chunk_size=1 << 20)  # chunks at flushes
+    data, sent, flushed = write_sample("zstd", chunk_size=1 << 20,  # chunks at flushes
+                                       threaded=True)
     path = tmp_path / "whole.mcap"
     path.write_bytes(data)
     with LogReader(path) as reader:
