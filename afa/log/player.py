@@ -263,11 +263,12 @@ class ReplayClock(VirtualClock):
         """Bisect between a time showing ``stamp`` and one that does not."""
         if self.stamp_at(outside) == stamp:
             return inside
+        start, offset = self._start, self._wall_offset  # stamp_at inlined: ~50 steps
         while True:
             middle = (inside + outside) / 2
-            if middle in (inside, outside):
+            if middle == inside or middle == outside:
                 return inside
-            if self.stamp_at(middle) == stamp:
+            if start + middle + offset == stamp:  # the same float sum as stamp_at
                 inside = middle
             else:
                 outside = middle
