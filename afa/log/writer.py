@@ -216,7 +216,10 @@ class McapWriter:
             _OP_METADATA_INDEX, _U64.pack(offset) + _U64.pack(len(record)) + _string(name)))
 
     def flush(self) -> None:
-        """Finish the open chunks and hand everything to the operating system."""
+        """Finish the open chunks and hand everything to the operating system (nothing
+        once the file is finished)."""
+        if self._finished:
+            return
         self._finish_chunks()
         self._stream.flush()
 
