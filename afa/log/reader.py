@@ -27,6 +27,7 @@ import heapq
 import io
 import json
 import struct
+import zlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +47,44 @@ _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 
 _OP_METADATA, _OP_DATA_END = 0x0C, 0x0F
 #: A record longer than this is taken as damage, not data.
 MAX_RECORD = 1 << 32
+
+
+# a message record's content: channel id, sequence, log time (then publish time, data)
+_MESSAGE_HEAD = struct.Struct("<HIQ")
+_MESSAGE_HEAD_SIZE = _MESSAGE_HEAD.size + 8
+_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size and CRC, len(compression)
+
+
+def _chunk_content(content: bytes, validate_crc: bool) -> bytes:
+    """The uncompressed records of a chunk record's content (MCAP: start and end time,
+    uncompressed size, CRC, compression, records). Raises ValueError (or the
+    decompressor's error) for a damaged chunk."""
+    _, _, size, crc, n = _CHUNK_HEAD.unpack_from(content)
+    at = _CHUNK_HEAD.size
+    compression = content[at:at + n].decode()
+    at += n
+    (length,) = struct.unpack_from("<Q", content, at)
+    at += 8
+    if at + length > len(content):
+        raise ValueError(f"its records claim {length} bytes, {len(content) - at} present")
+    data = content[at:at + length]
+    if compression == "zstd":
+        import zstandard
+
+        records = zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+    elif compression == "lz4":
+        import lz4.frame
+
+        records = lz4.frame.decompress(data)
+    elif compression == "":
+        records = data
+    else:
+        raise ValueError(f"unknown compression {compression!r}")
+    if len(records) != size:
+        raise ValueError(f"{len(records)} bytes uncompressed, {size} expected")
+    if validate_crc and crc != 0 and zlib.crc32(records) != crc:
+        raise ValueError("the uncompressed records fail their CRC")
+    return records
 
 
 class LogError(AfaError, ValueError):
@@ -243,16 +282,18 @@ class LogReader:
         if start is not None and end is not None:
             self.chunks.append(ChunkRef(offset, length, start, end, frozenset(seen)))
 
-    def _chunk_records(self, offset: int, content: bytes) -> list[Any] | None:
+    def _chunk_records(self, offset: int, content: bytes,
+                       wanted: frozenset[int] | None = None) -> list[Any] | None:
         """The messages of a chunk record's content as (channel, log_time, data, seq),
-        registering its schemas and channels; None (and a problem) if it is damaged."""
-        from mcap.data_stream import ReadDataStream
-        from mcap.records import Channel, Chunk, Message, Schema
-        from mcap.stream_reader import breakup_chunk
+        only those of ``wanted`` channels (None: all), registering its schemas and
+        channels; None (and a problem) if it is damaged.
 
+        Messages, nearly every record, are parsed here with one ``struct`` call each
+        and the data of an unwanted channel is never copied (a replay reads a few of a
+        recording's channels; the viewer channels are half its bytes); schemas and
+        channels go through the ``mcap`` package's record parser."""
         try:
-            chunk = Chunk.read(ReadDataStream(io.BytesIO(content)))
-            records = breakup_chunk(chunk, validate_crc=self.validate_crcs)
+            records = _chunk_content(content, self.validate_crcs)
         except Exception as exc:
             times = ""
             if len(content) >= 16:
@@ -262,15 +303,41 @@ class LogReader:
                                  f"({type(exc).__name__}: {exc}); its messages are skipped")
             return None
         out: list[Any] = []
-        for record in records:
-            if isinstance(record, Message):
-                out.append((record.channel_id, record.log_time, record.data, record.sequence))
-            elif isinstance(record, Schema):
-                self.schemas.setdefault(record.id, (record.name, record.encoding,
-                                                    bytes(record.data)))
-            elif isinstance(record, Channel) and record.id not in self.channels:
-                self._add_channel(record)
+        position, size = 0, len(records)
+        unpack_head, unpack_message = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from
+        try:
+            while position < size:
+                opcode, length = unpack_head(records, position)
+                body = position + _RECORD_HEAD.size
+                position = body + length
+                if position > size:
+                    raise ValueError(f"a record of {length} bytes runs past the chunk's end")
+                if opcode == _OP_MESSAGE:
+                    channel_id, sequence, log_time = unpack_message(records, body)
+                    if wanted is None or channel_id in wanted:
+                        out.append((channel_id, log_time,
+                                    records[body + _MESSAGE_HEAD_SIZE:position], sequence))
+                elif opcode in (_OP_SCHEMA, _OP_CHANNEL):
+                    self._chunk_definition(opcode, records[body:position])
+        except Exception as exc:
+            self.problems.append(f"{self.path}: the chunk at byte {offset} is damaged after "
+                                 f"{len(out)} message(s) ({type(exc).__name__}: {exc}); "
+                                 "the rest of it is skipped")
         return out
+
+    def _chunk_definition(self, opcode: int, content: bytes) -> None:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Channel, Schema
+
+        stream = ReadDataStream(io.BytesIO(content))
+        if opcode == _OP_SCHEMA:
+            schema = Schema.read(stream)
+            self.schemas.setdefault(schema.id, (schema.name, schema.encoding,
+                                                bytes(schema.data)))
+        else:
+            channel = Channel.read(stream)
+            if channel.id not in self.channels:
+                self._add_channel(channel)
 
     def _add_channel(self, channel: Any) -> None:
         schema = self.schemas.get(channel.schema_id, ("", "", b""))
@@ -305,7 +372,7 @@ class LogReader:
         return sorted((c for c in self.channels.values() if kind is None or c.kind == kind),
                       key=lambda c: (c.topic, c.id))
 
-    def _load(self, ref: ChunkRef) -> list[Any]:
+    def _load(self, ref: ChunkRef, wanted: frozenset[int] | None = None) -> list[Any]:
         f = self._file
         f.seek(ref.offset)
         head = f.read(_RECORD_HEAD.size)
@@ -313,7 +380,7 @@ class LogReader:
             self.problems.append(f"{self.path}: the chunk at byte {ref.offset} is missing")
             return []
         _, length = _RECORD_HEAD.unpack(head)
-        records = self._chunk_records(ref.offset, f.read(length))
+        records = self._chunk_records(ref.offset, f.read(length), wanted)
         return [] if records is None else records
 
     def messages(self, start: int | None = None, end: int | None = None,
@@ -330,10 +397,9 @@ class LogReader:
             while position < len(refs) and (not heap or refs[position].start <= heap[0][0]):
                 ref = refs[position]
                 position += 1
-                for index, record in enumerate(self._load(ref)):
-                    channel_id, log_time = record[0], record[1]
-                    if (wanted is not None and channel_id not in wanted) or (
-                            start is not None and log_time < start) or (
+                for index, record in enumerate(self._load(ref, wanted)):
+                    log_time = record[1]
+                    if (start is not None and log_time < start) or (
                             end is not None and log_time >= end):
                         continue
                     heapq.heappush(heap, (log_time, ref.offset, index, record))
@@ -354,7 +420,7 @@ class LogReader:
             if ref.channels is not None and not (ref.channels & missing):
                 continue
             best: dict[int, tuple[int, Any]] = {}
-            for record in self._load(ref):
+            for record in self._load(ref, frozenset(missing)):
                 channel_id, log_time = record[0], record[1]
                 if channel_id in missing and log_time < time:
                     if channel_id not in best or log_time >= best[channel_id][0]:

@@ -43,6 +43,7 @@ from afa.errors import AfaError, ComponentError
 from afa.events import Event, Overflow
 from afa.log import format as fmt
 from afa.log.viewer import SCHEMAS, TF_TOPIC, VEHICLE_FRAME, ViewerConverter, dumps
+from afa.log.writer import COMPRESSIONS, ZSTD_LEVEL, McapWriter
 from afa.polling import LocalInvoker, PollRecord, encode_arguments, encode_result, proxy_for
 from afa.ports import Direction, interface_name
 from afa.tasks import spawn
@@ -53,7 +54,10 @@ __all__ = ["Recorder", "COMPRESSIONS", "load_mcap"]
 
 log = logging.getLogger("afa.log")
 
-COMPRESSIONS = ("zstd", "lz4", "none")
+#: The chunk group of the viewer channels (:class:`afa.log.writer.McapWriter`): their
+#: messages are half a recording's bytes and a replay never reads them, so they get
+#: chunks of their own that a replay or a seek skips without decompressing.
+VIEWER_GROUP = 1
 #: How often the geometry model's transforms are written again (s of clock time), so a
 #: viewer that opens the file in the middle finds them.
 STATIC_TF_PERIOD = 10.0
@@ -73,7 +77,9 @@ class Recorder:
     """Writes a system's events, polls, statistics and viewer channels to ``path`` (MCAP).
 
     ``events``: event-name patterns to record (``*``, ``?``, ``[...]``; None: all).
-    ``compression``: ``zstd`` (default), ``lz4`` or ``none``. ``viewer``: also write the
+    ``compression``: ``zstd`` (default), ``lz4`` or ``none``; ``level``: the zstd level
+    (:data:`afa.log.writer.ZSTD_LEVEL`, 2: decision 0030); ``threaded``: compress chunks
+    in a worker thread, off the event loop (decision 0030). ``viewer``: also write the
     Foxglove channels. ``maxsize``: the observer's buffer (events); ``poll_buffer``: the
     poll records' buffer. ``on_flush(count)`` is told the number of events on disk after
     each flush.
@@ -83,7 +89,8 @@ class Recorder:
     """
 
     def __init__(self, path: str | Path, *, events: Iterable[str] | None = None,
-                 compression: str = "zstd", chunk_size: int = 1 << 20, viewer: bool = True,
+                 compression: str = "zstd", level: int = ZSTD_LEVEL,
+                 chunk_size: int = 1 << 20, threaded: bool = True, viewer: bool = True,
                  flush_period: float = 1.0, maxsize: int = 1 << 16, poll_buffer: int = 4096,
                  on_flush: Callable[[int], None] | None = None) -> None:
         if compression not in COMPRESSIONS:
@@ -94,6 +101,8 @@ class Recorder:
         self.path = Path(path)
         self.patterns = None if events is None else [p for p in events if p]
         self.compression = compression
+        self.level = level
+        self.threaded = threaded
         self.chunk_size = chunk_size
         self.viewer = viewer
         self.flush_period = flush_period
@@ -113,7 +122,7 @@ class Recorder:
         self._channels: dict[Any, int] = {}
         self._viewer = ViewerConverter()
         self._file: IO[bytes] | None = None
-        self._writer: Any = None
+        self._writer: Any = None  # McapWriter once attached
         self._system: Any = None
         self._observer: Any = None
         self._remove_hook: Callable[[], None] | None = None
@@ -134,17 +143,15 @@ class Recorder:
         from the first). ``metadata`` adds entries to the file's ``afa`` record (the
         CLI adds the world and seed of a simulation). Raises AfaError if the file cannot
         be written."""
-        mcap = load_mcap()
+        load_mcap()  # the replay's reader; recording needs zstandard / lz4 with it
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
         except OSError as exc:
             raise AfaError(f"cannot record to {self.path}: {exc.strerror or exc}") from exc
-        compression = {"zstd": mcap.writer.CompressionType.ZSTD,
-                       "lz4": mcap.writer.CompressionType.LZ4,
-                       "none": mcap.writer.CompressionType.NONE}[self.compression]
-        self._writer = mcap.writer.Writer(self._file, chunk_size=self.chunk_size,
-                                          compression=compression)
+        self._writer = McapWriter(self._file, compression=self.compression,
+                                  level=self.level, chunk_size=self.chunk_size,
+                                  threaded=self.threaded)
         from afa import __version__
 
         self._writer.start(profile=fmt.PROFILE, library=f"afa {__version__}")
@@ -308,7 +315,8 @@ class Recorder:
                 schema = self._schemas[schema_name] = self._writer.register_schema(
                     schema_name, fmt.SCHEMA_ENCODING, json.dumps(SCHEMAS[schema_name]).encode())
             channel = self._channels[key] = self._writer.register_channel(
-                topic, fmt.JSON_ENCODING, schema, {fmt.KIND: fmt.VIEWER})
+                topic, fmt.JSON_ENCODING, schema, {fmt.KIND: fmt.VIEWER},
+                group=VIEWER_GROUP)
         data = message if isinstance(message, bytes) else dumps(message)
         self._writer.add_message(channel, nanoseconds, data, nanoseconds)
         self.viewer_written += 1

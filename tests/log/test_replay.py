@@ -117,12 +117,14 @@ def test_recorded_polls_stand_among_the_events_they_came_between(recorded_autono
         placed = 0
         for _, group in player._instants(player.first):
             last_event = last_poll = -1
-            for message, header in group:
+            for message, header, record in group:
                 if header is not None:  # events in sequence, each after the calls
                     assert header[3] > max(last_event, last_poll)  # made before it
                     last_event = header[3]
+                    assert record is None
                     continue
-                record = player.reader.decode_wire(message)
+                # a call comes decoded by the feeder (it needed its seq), not twice
+                assert record.seq == player.reader.decode_wire(message).seq
                 assert record.seq >= max(last_event, last_poll, 0)
                 last_poll = record.seq
                 if last_event >= 0:  # an event of this instant came before it

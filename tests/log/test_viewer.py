@@ -207,3 +207,66 @@ def test_votes_and_maps_are_drawn_at_display_rates_poses_at_every_stamp():
     assert len(drawn["Pose"]) == 200
     # seeking back draws at once
     assert converter.encode("ArcVote", "PurePursuit", vote(100.1, "PurePursuit"))
+
+
+def test_what_the_recorder_writes_is_the_converted_document_byte_for_byte():
+    """``encode`` writes point clouds and maps without json.dumps of the base64 text:
+    its bytes must be exactly ``json.dumps`` of what ``convert`` builds (compact), for
+    every point-cloud form and every map type, NaN cells and points included."""
+    rng = np.random.default_rng(4)
+    beams = rng.normal(size=(7, 3))
+    valid = np.array([True, False, True, True, False, True, True])
+    beams[~valid] = np.nan
+    pixels = rng.normal(size=(3, 4, 3)).astype(np.float32)
+    seen = rng.random((3, 4)) > 0.4
+    pixels[~seen] = np.nan
+    stamp = TimeIDL(sec=1126958401, usec=123456)
+    from idl import Range3dArrayEventIDL, Range3dLaserIDL, Range3dStereoEventIDL
+
+    bodies = [
+        ("Laser11", "laser", Range3dSeqEventIDL(time=stamp, sensorId=11, frame="L:F \u00e9",
+                                                points=beams[valid])),
+        ("Laser12", "laser", Range3dLaserIDL(time=stamp, sensorId=12, frame="L:G",
+                                             points=beams, valid=valid)),
+        ("Stereo", "stereo", Range3dStereoEventIDL(time=stamp, sensorId=3, frame="D:I",
+                                                   points=pixels, valid=seen)),
+        ("StereoSeq", "stereo2", Range3dArrayEventIDL(time=stamp, sensorId=4, frame="D:I",
+                                                      points=pixels[seen])),
+        ("Empty", "laser", Range3dSeqEventIDL(time=stamp, sensorId=13, frame="L:H",
+                                              points=np.zeros((0, 3)))),
+    ]
+    cells = np.arange(12, dtype=np.float32).reshape(4, 3) / 13
+    cells[0, 2] = np.nan
+    fields = header()
+    fields["time"] = stamp
+    bodies += [
+        ("Terrain", "terrain", MapArrayEventIDL(
+            **fields, elevation=cells, minHeight=cells - 1, maxHeight=cells + 1,
+            pointCount=np.ones((4, 3), np.int32), variance=cells * 2)),
+        ("Traverse", "trav", TravMapArrayEventIDL(
+            **fields, hazard=cells, goodness=np.nan_to_num(1 - cells),
+            vehiclePosition=Position3DIDL())),
+        ("PlanMap", "plan", PlanMapEventIDL(
+            **fields, hazard=cells, goodness=np.nan_to_num(cells),
+            vehiclePosition=Position3DIDL(),
+            aPrioriCost=np.ones((4, 3), np.float32),
+            sensedCost=np.full((4, 3), np.inf, np.float32),
+            planningBoundary=PlanningBoundaryIDL(minX=0, minY=0, maxX=3, maxY=2))),
+    ]
+    for event_type, origin, body in bodies:
+        converted = ViewerConverter().convert(event_type, origin, body)
+        encoded = ViewerConverter().encode(event_type, origin, body)
+        assert len(converted) == len(encoded) == 1, event_type
+        [(topic, schema, message)], [(topic2, schema2, data)] = converted, encoded
+        assert (topic, schema) == (topic2, schema2)
+        assert data == json.dumps(message, separators=(",", ":"), allow_nan=False).encode()
+        conforms(json.loads(data), SCHEMAS[schema])
+    # the drawn points of a static form are its valid ones, NaN-free
+    [(_, _, data)] = ViewerConverter().encode("Stereo", "stereo", bodies[2][2])
+    drawn = np.frombuffer(base64.b64decode(json.loads(data)["data"]), "<f4").reshape(-1, 3)
+    assert np.array_equal(drawn, pixels[seen])
+    # a sensor whose sequence form is drawn is not drawn again from its static form
+    converter = ViewerConverter()
+    assert converter.encode("Laser11", "laser", bodies[0][2])
+    static = Range3dLaserIDL(time=stamp, sensorId=11, frame="L:F", points=beams, valid=valid)
+    assert converter.encode("Laser11Array", "laser", static) == []
