@@ -78,8 +78,8 @@ class Recorder:
 
     ``events``: event-name patterns to record (``*``, ``?``, ``[...]``; None: all).
     ``compression``: ``zstd`` (default), ``lz4`` or ``none``; ``level``: the zstd level
-    (:data:`afa.log.writer.ZSTD_LEVEL`, 2: decision 0030); ``threaded``: compress chunks
-    in a worker thread, off the event loop (decision 0030). ``viewer``: also write the
+    (:data:`afa.log.writer.ZSTD_LEVEL`, 2: decision 0031); ``threaded``: compress chunks
+    in a worker thread, off the event loop (decision 0031). ``viewer``: also write the
     Foxglove channels. ``maxsize``: the observer's buffer (events); ``poll_buffer``: the
     poll records' buffer. ``on_flush(count)`` is told the number of events on disk after
     each flush.

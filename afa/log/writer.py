@@ -1,4 +1,4 @@
-"""A chunked, indexed MCAP writer for the recorder (decision 0030).
+"""A chunked, indexed MCAP writer for the recorder (decision 0031).
 
 The ``mcap`` package's writer builds a ``Message`` object and writes each of its fields
 through a stream per message (about 14 µs each, 10 000 messages per 30 simulated
