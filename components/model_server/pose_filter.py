@@ -1151,9 +1151,17 @@ class RawPose:
             north += self._fix_velocity[1] * dt
         if self.heading is None:
             return east, north
-        ax, ay, _ = self.antenna_offset
-        c, s = math.cos(self.heading), math.sin(self.heading)
-        return east - (c * ax - s * ay), north - (s * ax + c * ay)
+        lever = self._lever()
+        return east - lever[0], north - lever[1]
+
+    def _lever(self) -> FloatArray:
+        """The antenna's offset from the vehicle reference in the world frame: the body
+        offset turned by heading, pitch and roll (on a 13° slope the antenna 1.75 m up
+        leans 0.39 m downhill of the axle)."""
+        rotation = homogeneous_transform(0.0, 0.0, 0.0, self.heading or 0.0, self._pitch,
+                                         self._roll)[:3, :3]
+        lever: FloatArray = rotation @ np.asarray(self.antenna_offset, dtype=np.float64)
+        return lever
 
     @property
     def east(self) -> float:
@@ -1199,7 +1207,8 @@ class RawPose:
         if at is not None:
             _finite("at", at)
         east, north = self._reference(at)
-        return _transform_from(initial_utm, east, north, self._elevation,
-                               self.antenna_offset[2], self.heading or 0.0, self._pitch,
-                               self._roll)
+        height = float(self._lever()[2]) if self.heading is not None else \
+            self.antenna_offset[2]
+        return _transform_from(initial_utm, east, north, self._elevation, height,
+                               self.heading or 0.0, self._pitch, self._roll)
 

@@ -429,8 +429,11 @@ def test_raw_pose_gps_heading_only_when_moving() -> None:
     assert raw.heading == pytest.approx(0.0)  # due east
     raw.update_imu(1.0, roll=0.02, pitch=0.01)
     m = raw.transform((E0, N0, 80.0))
-    # antenna 0.9 m ahead of the reference: the reference is 0.9 m west of the fix
-    np.testing.assert_allclose(m[:3, 3], [9.1, 20.0, 2.0 - 1.75], atol=1e-9)
+    # antenna 0.9 m ahead of and 1.75 m above the reference: the reference is about
+    # 0.9 m west of the fix and 1.75 m below it, the lever arm turned by the attitude
+    lever = Rotation.from_euler("ZYX", [0.0, 0.01, 0.02]).apply([0.9, 0.0, 1.75])
+    np.testing.assert_allclose(m[:3, 3], np.array([10.0, 20.0, 2.0]) - lever, atol=1e-9)
+    assert m[0, 3] == pytest.approx(9.1, abs=0.02)
     np.testing.assert_allclose(
         m[:3, :3], Rotation.from_euler("ZYX", [0.0, 0.01, 0.02]).as_matrix(), atol=1e-12)
     raw.update_gps(2.0, E0 + 11.0, N0 + 20.0, speed=0.1, track=math.radians(300.0))
@@ -486,3 +489,21 @@ def test_stationary_from_gps_positions_alone() -> None:
     assert pf.fidget_bias is not None and abs(pf.fidget_bias - BIAS) < 0.1 * BIAS
     assert not pf.stationary  # moving since 30 s
     assert run.pos_err[-1] < 1.0
+
+
+@pytest.mark.parametrize("yaw,pitch,roll", [(0.3, 0.0, 0.0), (0.3, math.radians(13.0), 0.0),
+                                            (-2.0, math.radians(-9.0), math.radians(7.0)),
+                                            (1.2, math.radians(4.0), math.radians(-12.0))])
+def test_raw_pose_takes_the_whole_attitude_out_of_the_antenna_lever_arm(yaw, pitch, roll):
+    # the antenna 0.9 m ahead of and 1.75 m above the rear axle (the Raptor's); on a
+    # slope it leans downhill of the axle: a heading-only lever arm put the pose 0.39 m
+    # off on a 13° slope. The oracle is scipy's rotation, intrinsic z-y'-x''.
+    offset = np.array([0.9, 0.0, 1.75])
+    raw = RawPose("imu", antenna_offset=tuple(offset))
+    axle = np.array([500_100.0, 5_500_200.0, 812.0])
+    antenna = axle + Rotation.from_euler("ZYX", [yaw, pitch, roll]).apply(offset)
+    raw.update_imu(0.0, yaw=yaw, roll=roll, pitch=pitch)
+    raw.update_gps(0.0, float(antenna[0]), float(antenna[1]), elevation=float(antenna[2]))
+    pose = raw.transform((500_000.0, 5_500_000.0, 800.0))
+    assert pose[:3, 3] == pytest.approx(axle - np.array([500_000.0, 5_500_000.0, 800.0]),
+                                        abs=1e-9)
