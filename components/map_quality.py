@@ -56,7 +56,8 @@ from components.gps_sokkia.codec import latlon_to_grid_near, latlon_to_utm
 from components.terrain_map.grid import GridGeometry
 from components.traversability_map.quality import GroundTruth, MapQuality, assess
 
-__all__ = ["map_summary", "MapFrame", "truth_in_map_frame", "DETECTION_RANGE", "TARGETS"]
+__all__ = ["map_summary", "MapFrame", "truth_in_map_frame", "registration_world",
+           "DETECTION_RANGE", "TARGETS"]
 
 #: Obstacle cells within this distance (m) of the track count (the laser's reach).
 DETECTION_RANGE = 8.0
@@ -139,6 +140,28 @@ def truth_in_map_frame(terrain: Any, frame: MapFrame, x_range: tuple[float, floa
     surface = world.surface[j, i].astype(np.float64) + frame.dz
     ids = None if world.ids is None else world.ids[j, i]
     return GroundTruth(float(x[0]), float(y[0]), res, surface, world.obstacle[j, i], ids)
+
+
+def registration_world(heading: float, start_east: float, speed: float,
+                       seconds: float) -> bytes:
+    """The world map registration is measured on (decision 0025): flat, noise-free ground,
+    a 0.6 m box (east -0.5..0.5, north 2..6) north of the line north = 0 and a 0.8 m deep
+    ditch (east 5..7, north -6..-3) south of it, and a straight scripted drive along the
+    line from ``start_east`` at ``heading`` (deg), ``speed`` (m/s) for ``seconds``."""
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<world name="registration">
+  <origin latitude="50.2717" longitude="-111.1766" elevation="750.0"/>
+  <terrain width="90" depth="40" resolution="0.1" roughness="0.0" seed="1">
+    <slope east="0.0" north="0.0"/>
+  </terrain>
+  <obstacle type="box" east="0" north="4" length="4" width="1" height="0.6" heading="0"/>
+  <obstacle type="ditch" east="6" north="-4.5" length="3" width="2" depth="0.8" heading="0"/>
+  <vehicle east="{start_east}" north="0" heading="{heading}"/>
+  <drive>
+    <command time="0" speed="{speed}" steering="0"/>
+    <command time="{seconds:.2f}" speed="0" steering="0"/>
+  </drive>
+</world>""".encode()
 
 
 def _figures(quality: MapQuality, *, terrain: bool) -> dict[str, Any]:

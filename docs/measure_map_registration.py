@@ -36,27 +36,10 @@ import components.gps_sokkia.emulator as gps_emulator  # noqa: E402
 from afa import VirtualClock  # noqa: E402
 from afa.sim.world import load_world, parse_world  # noqa: E402
 from components.gps_sokkia.fake import GpsNoise  # noqa: E402
-from components.map_quality import MapFrame  # noqa: E402
+from components.map_quality import MapFrame, registration_world  # noqa: E402
 from components.simulation import RaptorSimulation  # noqa: E402
 
 RAPTOR = ROOT / "configs" / "raptor.xml"
-
-
-def straight_world(heading: float, start_east: float, speed: float, seconds: float) -> bytes:
-    return f"""<?xml version="1.0" encoding="UTF-8"?>
-<world name="registration">
-  <origin latitude="50.2717" longitude="-111.1766" elevation="750.0"/>
-  <terrain width="90" depth="40" resolution="0.1" roughness="0.0" seed="1">
-    <slope east="0.0" north="0.0"/>
-  </terrain>
-  <obstacle type="box" east="0" north="4" length="4" width="1" height="0.6" heading="0"/>
-  <obstacle type="ditch" east="6" north="-4.5" length="3" width="2" depth="0.8" heading="0"/>
-  <vehicle east="{start_east}" north="0" heading="{heading}"/>
-  <drive>
-    <command time="0" speed="{speed}" steering="0"/>
-    <command time="{seconds:.2f}" speed="0" steering="0"/>
-  </drive>
-</world>""".encode()
 
 
 async def _run(simulation: RaptorSimulation, seconds: float | None,
@@ -133,7 +116,7 @@ def map_shift(simulation: RaptorSimulation, terrain: Any) -> tuple[float, float,
 def drive(speed: float) -> None:
     seconds = 20.0 / speed
     for heading, start in ((90.0, -17.0), (270.0, 23.0)):
-        world = parse_world(straight_world(heading, start, speed, seconds))
+        world = parse_world(registration_world(heading, start, speed, seconds))
         simulation = RaptorSimulation.from_xml(RAPTOR, world, clock=VirtualClock(), seed=0,
                                                teleop=True)
         run = asyncio.run(_run(simulation, seconds + 2.0))

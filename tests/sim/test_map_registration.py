@@ -20,37 +20,20 @@ import components.gps_sokkia.emulator as gps_emulator
 from afa import VirtualClock
 from afa.sim.world import parse_world
 from components.gps_sokkia.fake import GpsNoise
-from components.map_quality import MapFrame
+from components.map_quality import MapFrame, registration_world
 from components.simulation import RaptorSimulation
 
 RAPTOR = Path(__file__).resolve().parents[2] / "configs" / "raptor.xml"
 SPEED = 2.0
-# the box: 0.6 m high, east -0.5..0.5, north 2..6; the ditch: 0.8 m deep, east 5..7,
-# north -6..-3
+# components.map_quality.registration_world: the box east -0.5..0.5, north 2..6
 BOX_WEST, BOX_EAST, BOX_NORTH = -0.5, 0.5, 4.0
-
-
-def world(heading: float, start_east: float) -> bytes:
-    return f"""<?xml version="1.0" encoding="UTF-8"?>
-<world name="registration">
-  <origin latitude="50.2717" longitude="-111.1766" elevation="750.0"/>
-  <terrain width="90" depth="40" resolution="0.1" roughness="0.0" seed="1">
-    <slope east="0.0" north="0.0"/>
-  </terrain>
-  <obstacle type="box" east="0" north="4" length="4" width="1" height="0.6" heading="0"/>
-  <obstacle type="ditch" east="6" north="-4.5" length="3" width="2" depth="0.8" heading="0"/>
-  <vehicle east="{start_east}" north="0" heading="{heading}"/>
-  <drive>
-    <command time="0" speed="{SPEED}" steering="0"/>
-    <command time="10" speed="0" steering="0"/>
-  </drive>
-</world>""".encode()
 
 
 def drive(heading: float, start_east: float) -> tuple[RaptorSimulation, object]:
     async def simulate() -> tuple[RaptorSimulation, object]:
-        simulation = RaptorSimulation.from_xml(RAPTOR, parse_world(world(heading, start_east)),
-                                               clock=VirtualClock(), seed=0, teleop=True)
+        world = parse_world(registration_world(heading, start_east, SPEED, 10.0))
+        simulation = RaptorSimulation.from_xml(RAPTOR, world, clock=VirtualClock(), seed=0,
+                                               teleop=True)
         async with simulation:
             await simulation.system.run(12.0)
             terrain = simulation.system.components["TerrainService"].latest_map.get()
@@ -154,8 +137,9 @@ def test_frame_pose_at_interpolates_the_last_physics_steps():
     frame = "FrontNoddingSICKLeft:AxleCenterFreeEnd"
 
     async def simulate():
-        simulation = RaptorSimulation.from_xml(RAPTOR, parse_world(world(90.0, -17.0)),
-                                               clock=VirtualClock(), seed=0, teleop=True)
+        world = parse_world(registration_world(90.0, -17.0, SPEED, 10.0))
+        simulation = RaptorSimulation.from_xml(RAPTOR, world, clock=VirtualClock(), seed=0,
+                                               teleop=True)
         async with simulation:
             await simulation.system.run(4.0)  # moving at 2 m/s
             history = list(simulation._history)
