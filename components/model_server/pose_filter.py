@@ -1142,7 +1142,8 @@ class RawPose:
             self.heading = wrap_angle(yaw)
             self._fresh_heading = True
 
-    def _reference(self, at: float | None = None) -> tuple[float, float]:
+    def _reference(self, at: float | None = None) -> tuple[float, float, float]:
+        """East, north of the vehicle reference and the antenna's height above it."""
         assert self._fix is not None
         east, north = self._fix
         if at is not None and self._fix_time is not None:
@@ -1150,9 +1151,9 @@ class RawPose:
             east += self._fix_velocity[0] * dt
             north += self._fix_velocity[1] * dt
         if self.heading is None:
-            return east, north
+            return east, north, self.antenna_offset[2]
         lever = self._lever()
-        return east - lever[0], north - lever[1]
+        return east - lever[0], north - lever[1], float(lever[2])
 
     def _lever(self) -> FloatArray:
         """The antenna's offset from the vehicle reference in the world frame: the body
@@ -1206,9 +1207,7 @@ class RawPose:
             raise PoseUnavailableError("no GPS fix yet")
         if at is not None:
             _finite("at", at)
-        east, north = self._reference(at)
-        height = float(self._lever()[2]) if self.heading is not None else \
-            self.antenna_offset[2]
+        east, north, height = self._reference(at)
         return _transform_from(initial_utm, east, north, self._elevation, height,
                                self.heading or 0.0, self._pitch, self._roll)
 
