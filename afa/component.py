@@ -293,11 +293,25 @@ class Component(Generic[P]):
 
     def spawn(self, coroutine: Coroutine[Any, Any, Any],
               name: str | None = None) -> asyncio.Task[Any]:
-        """Run ``coroutine`` as part of this component (failing with it)."""
+        """Run ``coroutine`` as part of this component (failing with it). Cancelling the
+        task is no failure; a CancelledError it raises without being cancelled is."""
         if self._scope is None:
             coroutine.close()
             raise ComponentError(f"{self.name}: spawn() is only possible while starting or running")
-        return self._scope.spawn(coroutine, name or self.name)
+        name = name or self.name
+        return self._scope.spawn(self._own_task(coroutine, name), name)
+
+    async def _own_task(self, coroutine: Coroutine[Any, Any, Any], name: str) -> Any:
+        """A spawned task's body: a CancelledError that no ``cancel()`` asked for (one
+        raised, or leaked from a helper's cancelled future) fails the component instead
+        of ending the task silently while the component looks RUNNING and healthy."""
+        try:
+            return await coroutine
+        except asyncio.CancelledError:
+            if _cancel_requested() or self._stopping():
+                raise
+            raise ComponentError(f"{self.name}: task {name!r} raised CancelledError "
+                                 "without being cancelled") from None
 
     def set_health(self, healthy: bool, detail: str = "") -> None:
         """Report the component (un)healthy, e.g. while its device is lost."""
@@ -371,6 +385,12 @@ class Component(Generic[P]):
                 await _Forever()
         except BaseExceptionGroup as group:
             raise first_error(group) from None
+        except asyncio.CancelledError:
+            if _cancel_requested():
+                raise  # stopped by the supervisor (or the system)
+            # setup() or run() raised it of its own: a failure, not a silent stop
+            raise ComponentError(f"{self.name}: setup() or run() raised CancelledError "
+                                 "without being cancelled") from None
         finally:
             self._scope = None
             for output in self._outputs:
@@ -456,6 +476,13 @@ class _NamesItsComponent(logging.Filter):
         if self.component not in message:
             record.msg, record.args = f"{self.component}: {message}", None
         return True
+
+
+def _cancel_requested() -> bool:
+    """Whether the running task was asked to stop (``cancel()``), as opposed to meeting
+    a CancelledError that some code raised or let escape."""
+    task = asyncio.current_task()
+    return task is None or task.cancelling() > 0
 
 
 def _component_logger(name: str) -> logging.Logger:

@@ -392,6 +392,73 @@ async def test_a_handler_that_ends_any_other_way_than_returning_fails_its_compon
     assert "the handler of 'A' raised" in str(leaky.last_error)
 
 
+@pytest.mark.parametrize("where", ["run", "a spawned task"])
+async def test_a_cancelled_error_from_the_components_own_code_fails_it(where):
+    """Issue 16, defect 5, beyond handlers: run() or a task the component spawned that
+    ends with a CancelledError nobody asked for (say, from awaiting a helper's cancelled
+    future) fails the component, which is restarted: it is neither left STOPPING for
+    good nor left RUNNING and healthy with its task gone."""
+    clock = VirtualClock(start=0.0)
+
+    class Quitter(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.lives = 0
+
+        async def run(self):
+            self.lives += 1
+
+            async def give_up():
+                await self.clock.sleep(0.5)
+                raise asyncio.CancelledError  # not cancelled by anyone
+
+            if where == "run":
+                await give_up()
+            else:
+                self.spawn(give_up(), "helper")
+
+    quitter = Quitter("Quitter")
+    async with System([quitter], clock=clock,
+                      restart_policy=RestartPolicy(initial=0.1)) as system:
+        await clock.advance(1.0)
+        health = system.health()["Quitter"]
+        assert quitter.failures >= 1 and quitter.restarts >= 1, health
+        assert quitter.lives >= 2
+    assert isinstance(quitter.last_error, ComponentError)
+    assert "CancelledError without being cancelled" in str(quitter.last_error)
+
+
+async def test_a_setup_that_raises_cancelled_error_fails_to_start():
+    class Quitter(SubscribePublishServer):
+        async def setup(self):
+            raise asyncio.CancelledError  # not cancelled by anyone
+
+    with pytest.raises(StartupError, match="raised CancelledError without being cancelled"):
+        async with asyncio.timeout(60):  # (before: the start never ended)
+            async with System([Quitter("Quitter")], clock=VirtualClock(start=0.0)):
+                pass
+
+
+async def test_stopping_a_component_whose_task_it_cancels_itself_is_no_failure():
+    """A component may cancel a task it spawned (a helper it no longer needs): that is
+    not a failure; neither is stopping the component while its tasks run."""
+    clock = VirtualClock(start=0.0)
+
+    class Tidy(SubscribePublishServer):
+        async def run(self):
+            helper = self.spawn(self.clock.sleep(100.0), "helper")
+            await self.clock.sleep(0.5)
+            helper.cancel()
+            self.spawn(self.clock.sleep(100.0), "another")
+
+    tidy = Tidy("Tidy")
+    async with System([tidy], clock=clock) as system:
+        await clock.advance(2.0)
+        assert system.health()["Tidy"].healthy
+        await system.stop_component("Tidy")
+    assert tidy.failures == 0 and tidy.state is State.STOPPED
+
+
 async def test_statistics_after_a_failed_setup_never_raise():
     clock = VirtualClock(start=0.0)
 
