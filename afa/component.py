@@ -25,7 +25,9 @@ included) or a spawned task fails the component as a unit: it is logged with the
 component's name, its names are unbound, its subscriptions closed, and the supervisor
 (:mod:`afa.system`) restarts it with backoff per its :class:`RestartPolicy`. A handler
 that ends any other way than returning (even with a ``CancelledError`` of its own) fails
-it too. The other components keep running.
+it too, and so does a ``CancelledError`` that setup, run or a spawned task raises without
+having been cancelled (cancelling a task the component spawned is no failure). The other
+components keep running.
 
 Components are generic in their parameter model: ``class Gps(PublishServerReactor[
 GpsParameters, GpsMessage])`` makes ``self.parameters`` a ``GpsParameters``.
