@@ -548,8 +548,6 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
             summary.update(bridge_summary(system))
             if simulation is not None:
                 summary.update(simulation.summary())
-                if not simulation.teleop:
-                    summary.update(simulation.course_reference())
     except StartupError as exc:
         await _close(simulation)
         print(f"afa run: the system did not start. {exc}".replace("\n", " "), file=sys.stderr)
@@ -562,6 +560,10 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
         if recorder is not None:
             recorder.finish()  # the index and summary; what was flushed is safe anyway
     await _close(simulation)
+    if simulation is not None and not simulation.teleop:
+        # planned once the system has stopped: seconds of CPU that, while the drivers
+        # ran on the wall clock, starved them (every link "lost" at the end of the run)
+        summary.update(simulation.course_reference())
     _print_summary(summary)
     if args.summary is not None:
         args.summary.write_text(json.dumps(summary, indent=2))

@@ -278,3 +278,28 @@ def test_run_help_lists_the_shipped_worlds(capsys):
     out = " ".join(capsys.readouterr().out.split())  # argparse wraps the help text
     for world in ("rock-field", "open-field", "slalom"):
         assert world in out.replace("- ", "-")
+
+
+def test_the_reference_course_is_planned_after_the_system_stopped(tmp_path, monkeypatch,
+                                                                  capsys):
+    """Planning the shortest course (the run summary's path ratio) takes seconds of CPU
+    on one thread: done while the components still ran, it starved the drivers of a
+    real-time `--sim` run, which then ended with every link "lost" and the command
+    watchdog's warnings. It is planned once the system has stopped."""
+    from components.simulation import RaptorSimulation
+
+    planned = RaptorSimulation.course_reference
+    states = []
+
+    def course_reference(self):
+        states.append({c.state.value for c in self.system.components.values()})
+        return planned(self)
+
+    monkeypatch.setattr(RaptorSimulation, "course_reference", course_reference)
+    summary = tmp_path / "summary.json"
+    assert main(["run", str(RAPTOR), "--sim", "--fast", "--world", "short-hop",
+                 "--duration", "1", "--summary", str(summary)]) == 0  # cut short: no verdict
+    assert states == [{"stopped"}]
+    data = json.loads(summary.read_text())
+    assert data["oracle_distance_m"] > 20.0 and data["path_ratio"] is None
+    assert "mission: NOT complete" in capsys.readouterr().out
