@@ -55,7 +55,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 from afa.clock import Clock
 from afa.codec import StreamDecoder
 from afa.config.parameters import Parameters
-from afa.errors import ComponentError, EDevIO
+from afa.errors import ComponentError, ConfigError, EDevIO
 from afa.events import EventChannel, Overflow
 from afa.meter import LoopMeter
 from afa.naming import NameRegistry, join_name
@@ -457,8 +457,10 @@ class Component(Generic[P]):
         self.failures += 1
         self.last_error = error
         self._set_state(State.FAILED)
+        # an input file's error (ConfigError: ``file:line: message``) is the user's to
+        # fix and says where; a traceback is for faults in the code
         self.log.error("component %s failed: %s: %s", self.name, type(error).__name__, error,
-                       exc_info=error)
+                       exc_info=None if isinstance(error, ConfigError) else error)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} {self.state.value}>"
