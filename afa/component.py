@@ -71,7 +71,7 @@ from afa.polling import (
 )
 from afa.ports import Handler, Input, Output, PortInfo, Served, Used
 from afa.reactor import Backoff, Reactor
-from afa.tasks import Scope, first_error
+from afa.tasks import Scope, cancel_requested, first_error
 from afa.transport import ByteStream, DeviceOpener, DeviceSpec
 from idl._base import IDLModel, Interface
 
@@ -310,7 +310,7 @@ class Component(Generic[P]):
         try:
             return await coroutine
         except asyncio.CancelledError:
-            if _cancel_requested() or self._stopping():
+            if cancel_requested() or self._stopping():
                 raise
             raise ComponentError(f"{self.name}: task {name!r} raised CancelledError "
                                  "without being cancelled") from None
@@ -388,7 +388,7 @@ class Component(Generic[P]):
         except BaseExceptionGroup as group:
             raise first_error(group) from None
         except asyncio.CancelledError:
-            if _cancel_requested():
+            if cancel_requested():
                 raise  # stopped by the supervisor (or the system)
             # setup() or run() raised it of its own: a failure, not a silent stop
             raise ComponentError(f"{self.name}: setup() or run() raised CancelledError "
@@ -480,13 +480,6 @@ class _NamesItsComponent(logging.Filter):
         if self.component not in message:
             record.msg, record.args = f"{self.component}: {message}", None
         return True
-
-
-def _cancel_requested() -> bool:
-    """Whether the running task was asked to stop (``cancel()``), as opposed to meeting
-    a CancelledError that some code raised or let escape."""
-    task = asyncio.current_task()
-    return task is None or task.cancelling() > 0
 
 
 def _component_logger(name: str) -> logging.Logger:

@@ -6,6 +6,7 @@ from typing import Any
 import pytest
 
 from afa import (
+    AfaError,
     Component,
     ComponentError,
     Fault,
@@ -437,6 +438,51 @@ async def test_a_setup_that_raises_cancelled_error_fails_to_start():
         async with asyncio.timeout(60):  # (before: the start never ended)
             async with System([Quitter("Quitter")], clock=VirtualClock(start=0.0)):
                 pass
+
+
+async def test_a_server_that_stops_during_a_call_gives_its_caller_an_error():
+    """A servant that awaits something its teardown cancels (an acknowledgement, say)
+    hands the caller an afa error, not a CancelledError: the caller is not being
+    cancelled, so a cancellation would now fail it (and used to end its task silently)."""
+    clock = VirtualClock(start=0.0)
+
+    class Slow(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.serves(TickSource, name)
+            self.pending: asyncio.Future[Tick] | None = None
+
+        async def getTick(self):
+            self.pending = asyncio.get_running_loop().create_future()
+            return await self.pending  # answered by a device that never answers
+
+        async def teardown(self):
+            if self.pending is not None:
+                self.pending.cancel()
+
+    class Caller(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.source = self.uses(TickSource, "Slow")
+            self.errors: list[Exception] = []
+
+        async def run(self):
+            async def ask():
+                await self.bound(self.source)
+                try:
+                    await self.source.getTick()
+                except AfaError as exc:
+                    self.errors.append(exc)
+
+            self.spawn(ask(), "ask")
+
+    slow, caller = Slow("Slow"), Caller("Caller")
+    async with System([slow, caller], clock=clock) as system:
+        await until(lambda: slow.pending is not None, clock, timeout=1.0)
+        await system.stop_component("Slow")
+        await until(lambda: caller.errors, clock, timeout=1.0)
+        assert system.health()["Caller"].healthy and caller.failures == 0
+    assert "Slow.getTick" in str(caller.errors[0])
 
 
 async def test_stopping_a_component_whose_task_it_cancels_itself_is_no_failure():
