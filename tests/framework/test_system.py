@@ -252,6 +252,25 @@ async def test_an_observer_that_raises_never_fails_or_slows_the_publisher(caplog
     assert any("observer broken failed" in r.getMessage() for r in caplog.records)
 
 
+async def test_an_observer_whose_callback_raises_cancelled_error_keeps_observing(caplog):
+    """A CancelledError the callback raises (nobody cancelled the observer) is one more
+    error, counted and logged: it does not end the observer silently."""
+    clock = VirtualClock(start=0.0)
+    seen = []
+
+    def leaky(event):
+        seen.append(event.body.n)
+        if len(seen) == 3:
+            raise asyncio.CancelledError
+
+    async with System([Ticker("Ticker", "A")], clock=clock) as system:
+        observer = system.observe(leaky, name="leaky")
+        await clock.advance(2.0)
+        stats = observer.statistics()
+    assert stats["errors"] == 1 and len(seen) >= 20
+    assert any("observer leaky failed" in r.getMessage() for r in caplog.records)
+
+
 async def test_a_slow_observer_drops_and_counts_instead_of_slowing_anyone():
     clock = VirtualClock(start=0.0)
     ticker, recorder = Ticker("Ticker", "A"), Recorder("Recorder", "A")
