@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import inspect
+import io
 import json
 import logging
 import signal
@@ -13,7 +15,7 @@ import time
 from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from contextlib import asynccontextmanager, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from afa.errors import AfaError, ConfigError
 
@@ -309,34 +311,54 @@ def _decoders() -> list[str]:
     return registry.decoders()
 
 
+_DECODE_READ = 65536  # bytes read from the input at a time (memory stays bounded)
+
+
 def _decode(args: argparse.Namespace) -> int:
     import dataclasses
 
     from afa import registry
 
     decoder = registry.load_decoder(args.device)()
-    try:
-        data = sys.stdin.buffer.read() if str(args.file) == "-" else args.file.read_bytes()
-    except OSError as exc:
-        print(f"afa decode: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
-        return EXIT_INVALID
-    messages = 0
-    for offset in range(0, len(data), 4096):
-        for message in decoder.feed(data[offset:offset + 4096]):
-            messages += 1
-            inner = getattr(message, "message", None)  # framed links wrap the message
-            kind = type(inner if dataclasses.is_dataclass(inner) else message).__name__
-            record = {"type": kind, **_jsonable(dataclasses.asdict(message))}
-            print(json.dumps(record, allow_nan=False))
+    sample = bytearray()  # the input's first 64 KiB, for the hint when nothing decodes
+    total = messages = 0
+    with contextlib.ExitStack() as stack:
+        try:
+            source = cast(io.BufferedIOBase, sys.stdin.buffer if str(args.file) == "-"
+                          else stack.enter_context(args.file.open("rb")))
+        except OSError as exc:
+            print(f"afa decode: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+            return EXIT_INVALID
+        # a stream, not read whole: an endless input (/dev/zero, a serial port, a pipe) is
+        # decoded as it comes, in bounded memory
+        while True:
+            try:
+                chunk = source.read1(_DECODE_READ)
+            except OSError as exc:
+                print(f"afa decode: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+                return EXIT_INVALID
+            if not chunk:
+                break
+            total += len(chunk)
+            if len(sample) < _DECODE_READ:
+                sample += chunk[:_DECODE_READ - len(sample)]
+            for offset in range(0, len(chunk), 4096):
+                for message in decoder.feed(chunk[offset:offset + 4096]):
+                    messages += 1
+                    inner = getattr(message, "message", None)  # framed links wrap it
+                    kind = type(inner if dataclasses.is_dataclass(inner) else message).__name__
+                    record = {"type": kind, **_jsonable(dataclasses.asdict(message))}
+                    print(json.dumps(record, allow_nan=False))
+            sys.stdout.flush()  # what this read decoded, now (a live input)
     stats = decoder.stats
     print(json.dumps({"statistics": {"messages": messages, "checksum_failures":
                                      stats.checksum_failures, "malformed": stats.malformed,
                                      "bytes_skipped": stats.bytes_skipped + decoder.buffered,
-                                     "bytes": len(data)}}))
+                                     "bytes": total}}))
     if messages == 0:
         sys.stdout.flush()
         print(f"afa decode: nothing decoded from {args.file} as {args.device} "
-              f"({len(data)} bytes{_other_decoders(args.device, data)})", file=sys.stderr)
+              f"({total} bytes{_other_decoders(args.device, bytes(sample))})", file=sys.stderr)
         return EXIT_FAILURE
     return EXIT_OK
 
