@@ -37,3 +37,13 @@ def test_a_gps_fake_on_a_clock_before_the_gps_epoch_says_so():
     """GPS time begins on 1980-01-06: a receiver cannot report an earlier date."""
     with pytest.raises(ValueError, match="before the GPS epoch"):
         FakeGps(VirtualClock(start=0.0))
+
+
+def test_a_misspelt_component_name_in_only_is_suggested(afa_system):
+    """`only=[...]` names Launcher entries; a typo gets a suggestion and the list."""
+    from afa.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"no Launcher entry named '3dmgServce' \(did you "
+                                          r"mean '3dmgService'\?\); the entries are "
+                                          r"NodLaserService, .*GpsSokkiaService"):
+        afa_system(CONFIG, only=["3dmgServce"])
