@@ -529,6 +529,17 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
         if args.expose:
             simulation.announce = _print_endpoint
         options["devices"] = simulation.device_for
+        if (simulation.time_limit is None and args.duration is None
+                and _console_args(args) is None and not getattr(args, "bridge", False)
+                and getattr(args, "process", None) is None):
+            # nothing would drive the vehicle and nothing would end the run
+            name = simulation.world.name
+            why = ("has no <drive> script for --teleop" if simulation.world.mission.waypoints
+                   else "has no mission and no <drive> script")
+            print(f"afa run: world {name!r} {why}: nothing would drive and the run would not "
+                  "end; drive its mission (without --teleop), or give --duration S or a "
+                  "--console to drive it from", file=sys.stderr)
+            return EXIT_INVALID
     system = System.from_xml(args.config, **options)
     if simulation is not None and args.process and not simulation.fakes:
         simulation = None  # its devices run in another process group, and so does the world
@@ -622,9 +633,16 @@ def _print_endpoint(component: str, endpoint: str) -> None:
     print(f"afa: {component} emulated on {endpoint}", file=sys.stderr, flush=True)
 
 
+def _console_args(args: argparse.Namespace) -> Any:
+    """What ``--console``/``--console-control`` ask for, or None."""
+    if getattr(args, "console", None) is None and not getattr(args, "console_control", False):
+        return None
+    return getattr(args, "console", None) or True
+
+
 def _console(args: argparse.Namespace, system: Any, simulation: Any) -> Any:
     """The browser console ``--console`` asks for, or None (afa.console)."""
-    if getattr(args, "console", None) is None and not getattr(args, "console_control", False):
+    if _console_args(args) is None:
         return None
     from afa.console import from_args
 

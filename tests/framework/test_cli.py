@@ -326,3 +326,13 @@ def test_the_reference_course_is_planned_after_the_system_stopped(tmp_path, monk
     data = json.loads(summary.read_text())
     assert data["oracle_distance_m"] > 20.0 and data["path_ratio"] is None
     assert "mission: NOT complete" in capsys.readouterr().out
+
+
+def test_a_run_in_which_nothing_drives_and_nothing_ends_is_refused(capsys):
+    """`--teleop` on a world without a <drive> script: nothing would drive and the run
+    would never end (it used to go on, silently, at full CPU under --fast)."""
+    assert main(["run", str(RAPTOR), "--sim", "--fast", "--world", "short-hop",
+                 "--teleop"]) == 2
+    err = capsys.readouterr().err
+    assert "world 'short-hop' has no <drive> script for --teleop" in err
+    assert "--duration" in err
