@@ -31,8 +31,11 @@ def build_components(config: Configuration, *, strict: bool = False,
     if wanted is not None:
         unknown = wanted - {entry.Name for entry in config.launcher.Components}
         if unknown:
+            names = [entry.Name for entry in config.launcher.Components]
             raise ConfigError(f"{config.path}: no Launcher entry named "
-                              f"{', '.join(sorted(unknown))}")
+                              + ", ".join(f"{name!r}{registry.suggest(name, names)}"
+                                          for name in sorted(unknown))
+                              + f"; the entries are {', '.join(names)}")
     if process is not None and process not in config.processes():
         raise ConfigError(f"{config.path}: no Launcher entry is in process group {process!r}; "
                           f"the groups are {', '.join(config.processes()) or 'none'}")

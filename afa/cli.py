@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import inspect
+import io
 import json
 import logging
 import signal
@@ -13,7 +15,7 @@ import time
 from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from contextlib import asynccontextmanager, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from afa.errors import AfaError, ConfigError
 
@@ -309,34 +311,54 @@ def _decoders() -> list[str]:
     return registry.decoders()
 
 
+_DECODE_READ = 65536  # bytes read from the input at a time (memory stays bounded)
+
+
 def _decode(args: argparse.Namespace) -> int:
     import dataclasses
 
     from afa import registry
 
     decoder = registry.load_decoder(args.device)()
-    try:
-        data = sys.stdin.buffer.read() if str(args.file) == "-" else args.file.read_bytes()
-    except OSError as exc:
-        print(f"afa decode: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
-        return EXIT_INVALID
-    messages = 0
-    for offset in range(0, len(data), 4096):
-        for message in decoder.feed(data[offset:offset + 4096]):
-            messages += 1
-            inner = getattr(message, "message", None)  # framed links wrap the message
-            kind = type(inner if dataclasses.is_dataclass(inner) else message).__name__
-            record = {"type": kind, **_jsonable(dataclasses.asdict(message))}
-            print(json.dumps(record, allow_nan=False))
+    sample = bytearray()  # the input's first 64 KiB, for the hint when nothing decodes
+    total = messages = 0
+    with contextlib.ExitStack() as stack:
+        try:
+            source = cast(io.BufferedIOBase, sys.stdin.buffer if str(args.file) == "-"
+                          else stack.enter_context(args.file.open("rb")))
+        except OSError as exc:
+            print(f"afa decode: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+            return EXIT_INVALID
+        # a stream, not read whole: an endless input (/dev/zero, a serial port, a pipe) is
+        # decoded as it comes, in bounded memory
+        while True:
+            try:
+                chunk = source.read1(_DECODE_READ)
+            except OSError as exc:
+                print(f"afa decode: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+                return EXIT_INVALID
+            if not chunk:
+                break
+            total += len(chunk)
+            if len(sample) < _DECODE_READ:
+                sample += chunk[:_DECODE_READ - len(sample)]
+            for offset in range(0, len(chunk), 4096):
+                for message in decoder.feed(chunk[offset:offset + 4096]):
+                    messages += 1
+                    inner = getattr(message, "message", None)  # framed links wrap it
+                    kind = type(inner if dataclasses.is_dataclass(inner) else message).__name__
+                    record = {"type": kind, **_jsonable(dataclasses.asdict(message))}
+                    print(json.dumps(record, allow_nan=False))
+            sys.stdout.flush()  # what this read decoded, now (a live input)
     stats = decoder.stats
     print(json.dumps({"statistics": {"messages": messages, "checksum_failures":
                                      stats.checksum_failures, "malformed": stats.malformed,
                                      "bytes_skipped": stats.bytes_skipped + decoder.buffered,
-                                     "bytes": len(data)}}))
+                                     "bytes": total}}))
     if messages == 0:
         sys.stdout.flush()
         print(f"afa decode: nothing decoded from {args.file} as {args.device} "
-              f"({len(data)} bytes{_other_decoders(args.device, data)})", file=sys.stderr)
+              f"({total} bytes{_other_decoders(args.device, bytes(sample))})", file=sys.stderr)
         return EXIT_FAILURE
     return EXIT_OK
 
@@ -507,6 +529,17 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
         if args.expose:
             simulation.announce = _print_endpoint
         options["devices"] = simulation.device_for
+        if (simulation.time_limit is None and args.duration is None
+                and _console_args(args) is None and not getattr(args, "bridge", False)
+                and getattr(args, "process", None) is None):
+            # nothing would drive the vehicle and nothing would end the run
+            name = simulation.world.name
+            why = ("has no <drive> script for --teleop" if simulation.world.mission.waypoints
+                   else "has no mission and no <drive> script")
+            print(f"afa run: world {name!r} {why}: nothing would drive and the run would not "
+                  "end; drive its mission (without --teleop), or give --duration S or a "
+                  "--console to drive it from", file=sys.stderr)
+            return EXIT_INVALID
     system = System.from_xml(args.config, **options)
     if simulation is not None and args.process and not simulation.fakes:
         simulation = None  # its devices run in another process group, and so does the world
@@ -548,8 +581,6 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
             summary.update(bridge_summary(system))
             if simulation is not None:
                 summary.update(simulation.summary())
-                if not simulation.teleop:
-                    summary.update(simulation.course_reference())
     except StartupError as exc:
         await _close(simulation)
         print(f"afa run: the system did not start. {exc}".replace("\n", " "), file=sys.stderr)
@@ -562,6 +593,10 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
         if recorder is not None:
             recorder.finish()  # the index and summary; what was flushed is safe anyway
     await _close(simulation)
+    if simulation is not None and not simulation.teleop:
+        # planned once the system has stopped: seconds of CPU that, while the drivers
+        # ran on the wall clock, starved them (every link "lost" at the end of the run)
+        summary.update(simulation.course_reference())
     _print_summary(summary)
     if args.summary is not None:
         args.summary.write_text(json.dumps(summary, indent=2))
@@ -598,9 +633,16 @@ def _print_endpoint(component: str, endpoint: str) -> None:
     print(f"afa: {component} emulated on {endpoint}", file=sys.stderr, flush=True)
 
 
+def _console_args(args: argparse.Namespace) -> Any:
+    """What ``--console``/``--console-control`` ask for, or None."""
+    if getattr(args, "console", None) is None and not getattr(args, "console_control", False):
+        return None
+    return getattr(args, "console", None) or True
+
+
 def _console(args: argparse.Namespace, system: Any, simulation: Any) -> Any:
     """The browser console ``--console`` asks for, or None (afa.console)."""
-    if getattr(args, "console", None) is None and not getattr(args, "console_control", False):
+    if _console_args(args) is None:
         return None
     from afa.console import from_args
 

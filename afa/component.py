@@ -25,7 +25,9 @@ included) or a spawned task fails the component as a unit: it is logged with the
 component's name, its names are unbound, its subscriptions closed, and the supervisor
 (:mod:`afa.system`) restarts it with backoff per its :class:`RestartPolicy`. A handler
 that ends any other way than returning (even with a ``CancelledError`` of its own) fails
-it too. The other components keep running.
+it too, and so does a ``CancelledError`` that setup, run or a spawned task raises without
+having been cancelled (cancelling a task the component spawned is no failure). The other
+components keep running.
 
 Components are generic in their parameter model: ``class Gps(PublishServerReactor[
 GpsParameters, GpsMessage])`` makes ``self.parameters`` a ``GpsParameters``.
@@ -53,7 +55,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 from afa.clock import Clock
 from afa.codec import StreamDecoder
 from afa.config.parameters import Parameters
-from afa.errors import ComponentError, EDevIO
+from afa.errors import ComponentError, ConfigError, EDevIO
 from afa.events import EventChannel, Overflow
 from afa.meter import LoopMeter
 from afa.naming import NameRegistry, join_name
@@ -69,7 +71,7 @@ from afa.polling import (
 )
 from afa.ports import Handler, Input, Output, PortInfo, Served, Used
 from afa.reactor import Backoff, Reactor
-from afa.tasks import Scope, first_error
+from afa.tasks import Scope, cancel_requested, first_error
 from afa.transport import ByteStream, DeviceOpener, DeviceSpec
 from idl._base import IDLModel, Interface
 
@@ -293,11 +295,25 @@ class Component(Generic[P]):
 
     def spawn(self, coroutine: Coroutine[Any, Any, Any],
               name: str | None = None) -> asyncio.Task[Any]:
-        """Run ``coroutine`` as part of this component (failing with it)."""
+        """Run ``coroutine`` as part of this component (failing with it). Cancelling the
+        task is no failure; a CancelledError it raises without being cancelled is."""
         if self._scope is None:
             coroutine.close()
             raise ComponentError(f"{self.name}: spawn() is only possible while starting or running")
-        return self._scope.spawn(coroutine, name or self.name)
+        name = name or self.name
+        return self._scope.spawn(self._own_task(coroutine, name), name)
+
+    async def _own_task(self, coroutine: Coroutine[Any, Any, Any], name: str) -> Any:
+        """A spawned task's body: a CancelledError that no ``cancel()`` asked for (one
+        raised, or leaked from a helper's cancelled future) fails the component instead
+        of ending the task silently while the component looks RUNNING and healthy."""
+        try:
+            return await coroutine
+        except asyncio.CancelledError:
+            if cancel_requested() or self._stopping():
+                raise
+            raise ComponentError(f"{self.name}: task {name!r} raised CancelledError "
+                                 "without being cancelled") from None
 
     def set_health(self, healthy: bool, detail: str = "") -> None:
         """Report the component (un)healthy, e.g. while its device is lost."""
@@ -371,6 +387,12 @@ class Component(Generic[P]):
                 await _Forever()
         except BaseExceptionGroup as group:
             raise first_error(group) from None
+        except asyncio.CancelledError:
+            if cancel_requested():
+                raise  # stopped by the supervisor (or the system)
+            # setup() or run() raised it of its own: a failure, not a silent stop
+            raise ComponentError(f"{self.name}: setup() or run() raised CancelledError "
+                                 "without being cancelled") from None
         finally:
             self._scope = None
             for output in self._outputs:
@@ -435,8 +457,10 @@ class Component(Generic[P]):
         self.failures += 1
         self.last_error = error
         self._set_state(State.FAILED)
+        # an input file's error (ConfigError: ``file:line: message``) is the user's to
+        # fix and says where; a traceback is for faults in the code
         self.log.error("component %s failed: %s: %s", self.name, type(error).__name__, error,
-                       exc_info=error)
+                       exc_info=None if isinstance(error, ConfigError) else error)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} {self.state.value}>"

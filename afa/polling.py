@@ -38,6 +38,7 @@ from pydantic import TypeAdapter, ValidationError
 from afa import errors
 from afa.clock import Clock
 from afa.errors import AfaError, ComponentError, EDevIO, InterfaceError, NameNotFound
+from afa.tasks import cancel_requested
 from idl import wire
 from idl._base import IDLModel, Interface, MethodSpec
 from idl._base import field as idl_field
@@ -161,14 +162,21 @@ class Servant:
         """Run ``method(**arguments)`` on the implementation.
 
         afa errors pass through unchanged; any other exception is logged with the
-        server's name and becomes a :class:`~afa.errors.ComponentError`.
+        server's name and becomes a :class:`~afa.errors.ComponentError`, and so does a
+        CancelledError the caller did not ask for (the server stopped during the call
+        and cancelled what the method awaited).
         """
         if method not in self.interface.methods:
             raise InterfaceError(f"{self.interface.__name__} has no method {method!r}")
         try:
             return await getattr(self.impl, method)(**arguments)
-        except (AfaError, asyncio.CancelledError):
+        except AfaError:
             raise
+        except asyncio.CancelledError:
+            if cancel_requested():
+                raise  # the caller is being cancelled (or timed out)
+            raise ComponentError(f"{self.name or self.interface.__name__}.{method}: "
+                                 "cancelled by the server (stopping or restarting)") from None
         except Exception as exc:
             self._log.exception("%s.%s raised", self.name or self.interface.__name__, method)
             raise ComponentError(f"{self.name}.{method} failed: {exc!r}") from exc

@@ -7,7 +7,8 @@
 - real devices are forbidden (``AFA_FORBID_REAL_DEVICES=1``) unless pytest runs with
   ``--afa-real-devices`` (hardware-in-the-loop runs): a mistyped device key then raises
   instead of writing to ``/dev/tty*``;
-- fixture ``virtual_clock``: a :class:`~afa.clock.VirtualClock` starting at 0;
+- fixture ``virtual_clock``: a :class:`~afa.clock.VirtualClock` (``monotonic()`` from 0,
+  stamps from 2005-09-17);
 - fixture ``afa_system``: a factory, ``afa_system(config, only=[...], devices={...})``,
   of systems built from a configuration file on ``virtual_clock`` (not started: the test
   starts it with ``async with``); real devices are off, so every device component
@@ -61,8 +62,10 @@ async def afa_tasks() -> AsyncIterator[TaskGroup]:
 
 @pytest.fixture
 def virtual_clock() -> VirtualClock:
-    """Virtual time from 0: deterministic, instant."""
-    return VirtualClock(start=0.0)
+    """Virtual time: deterministic, instant; ``monotonic()`` from 0, time stamps from
+    afa's default epoch (2005-09-17, a date every fake can encode: GPS time begins in
+    1980)."""
+    return VirtualClock()
 
 
 #: What the ``afa_system`` fixture returns: ``make(config, *, only=None, devices=None,

@@ -44,7 +44,7 @@ from afa.meter import LoopMeter
 from afa.naming import NameRegistry, join_name
 from afa.polling import LocalInvoker, PollLayer, current_caller, proxy_for
 from afa.ports import Catalog, PortInfo
-from afa.tasks import Scope, TaskGroup
+from afa.tasks import Scope, TaskGroup, cancel_requested
 from afa.transport import DeviceFactory, DeviceOpener, SerialSpec
 from idl._base import Interface
 
@@ -93,11 +93,19 @@ class Observer:
                 result = self.callback(event)
                 if result is not None:
                     await result
-            except Exception:
-                self.errors += 1
-                if self.errors <= 3:
-                    log.exception("observer %s failed on %s (event dropped)", self.name,
-                                  event.type)
+            except asyncio.CancelledError:
+                if cancel_requested():
+                    raise  # the system is stopping
+                self._failed(event, "raised CancelledError without being cancelled")
+            except Exception as exc:
+                self._failed(event, exc)
+
+    def _failed(self, event: Event, error: BaseException | str) -> None:
+        """One event the callback failed on: counted; the first three logged."""
+        self.errors += 1
+        if self.errors <= 3:
+            log.error("observer %s failed on %s (event dropped): %s", self.name, event.type,
+                      error, exc_info=error if isinstance(error, BaseException) else None)
 
     async def drain(self) -> None:
         """Process everything already queued (before a summary or a digest is read)."""

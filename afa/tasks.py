@@ -170,6 +170,14 @@ class Scope:
         return self._group.create_task(coroutine, name=name)
 
 
+def cancel_requested() -> bool:
+    """Whether the running task was asked to stop (``task.cancel()``), as opposed to
+    meeting a CancelledError that some code raised or let escape (a cancelled future
+    it awaited, say)."""
+    task = asyncio.current_task()
+    return task is None or task.cancelling() > 0
+
+
 def first_error(group: BaseExceptionGroup) -> BaseException:
     """The exception that ended a scope, unwrapped from its exception group (the first
     that is not a cancellation; the group itself if there is none)."""

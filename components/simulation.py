@@ -305,7 +305,9 @@ class RaptorSimulation:
         self._halted = False
         self._steering_sign = 0
         self.steering_sign_changes = 0
-        self._hazards: HazardField | None = None
+        # built now, before anything runs: half a second of CPU on a big world would
+        # starve the drivers of a real-time run if it were built when the physics starts
+        self._hazards: HazardField | None = HazardField(self.terrain, self.vehicle.parameters)
         self._outline_reach: float | None = None  # metres from the rear axle centre
         # where the outline's clearance was last looked up: east, north, yaw, clearance
         self._clearance_at: tuple[float, float, float, float] | None = None
@@ -472,7 +474,8 @@ class RaptorSimulation:
             raise RuntimeError("attach the simulation to a System before running it")
         self._start = self.clock.monotonic()
         self._history.append((self._start, self.state, {}))
-        self._hazards = HazardField(self.terrain, self.vehicle.parameters)
+        if self._hazards is None:
+            self._hazards = HazardField(self.terrain, self.vehicle.parameters)
         tasks = [system.tasks.spawn(self._physics(), owner="simulation physics")]
         if not self.teleop:
             tasks.append(system.tasks.spawn(self._mission(), owner="simulation mission"))

@@ -135,9 +135,10 @@ def _syntax_cause(exc: etree.XMLSyntaxError, data: bytes) -> tuple[int, str]:
 def _left_open(data: bytes, tag: str, first: int, last: int) -> int:
     """Which ``<tag>`` between lines ``first`` and ``last`` was left open, judged by
     indentation: the first start tag (not ``/>``) whose next line at its own indentation
-    or less is not its end tag. The parser only knows that the one at ``first`` did not
-    end where expected (an inner one left open took its end tag); ``first`` if the
-    indentation does not tell."""
+    or less is not its end tag at its own indentation (a less indented end tag is its
+    parent's). The parser only knows that the one at ``first`` did not end where
+    expected (an inner one left open took its end tag); ``first`` if the indentation
+    does not tell."""
     if last - first > _INDENT_SCAN:
         return first  # bounded work on any file: a long stretch is not guessed at
     lines = data.decode("utf-8", "replace").split("\n")
@@ -152,7 +153,8 @@ def _left_open(data: bytes, tag: str, first: int, last: int) -> int:
             continue
         for later in lines[number:last]:
             if later.strip() and indent(later) <= len(opened.group(1)):
-                if not later.lstrip().startswith(f"</{tag}"):
+                if (indent(later) < len(opened.group(1))
+                        or not later.lstrip().startswith(f"</{tag}")):
                     return number
                 break
     return first

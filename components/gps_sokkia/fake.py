@@ -222,6 +222,11 @@ class FakeGps(FakeDevice[GpsCommand]):
         super().__init__(clock)
         if solution_period <= 0:
             raise ValueError("solution_period must be > 0")
+        if clock.now() < GPS_EPOCH_UNIX:
+            raise ValueError(
+                f"the clock's time stamp {clock.now():g} s is before the GPS epoch "
+                "(1980-01-06), where a receiver's time begins: use a clock with later "
+                "stamps, e.g. VirtualClock() (2005-09-17) rather than VirtualClock(start=0)")
         self.source = source
         self.rng = rng
         self.noise = noise

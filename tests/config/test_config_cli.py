@@ -286,7 +286,9 @@ async def test_a_shared_serial_port_refuses_a_second_baud_rate():
     ('<parameter name="EventName" value="Imu"/>', '<parameter name="EventName" value=Imu/>'),
     ('<parameter name="Device" value="/dev/ttyUSB0"/>',
      '<parameter name="Device" value="/dev/ttyUSB0">'),
-], ids=["unclosed quote", "unquoted value", "element left open"])
+    # the last of its siblings: the next line is the parent's end tag, less indented
+    ('<parameter name="Baudrate" value="38400"/>', '<parameter name="Baudrate" value="38400">'),
+], ids=["unclosed quote", "unquoted value", "element left open", "last element left open"])
 def test_an_xml_syntax_error_is_reported_at_the_line_that_caused_it(old, new, tmp_path,
                                                                     capsys):
     """Not at the end tag or the next line, where the parser noticed it."""

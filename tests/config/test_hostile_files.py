@@ -21,6 +21,8 @@ import pkgutil
 import random
 import re
 import shutil
+import subprocess
+import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -457,3 +459,21 @@ def test_a_world_lists_at_most_a_hundred_problems(tmp_path: Path) -> None:
     first_omitted = _line(path, "<obstacle") + 100
     assert error.problems[-1] == (f"{path}:{first_omitted}: ... and 400 more problems (only "
                                   "the first 100 are listed)")
+
+
+@pytest.mark.parametrize("geometry", ["/dev/zero", "missing.XML"])
+def test_a_bad_geometry_file_is_a_file_line_message_without_a_traceback(geometry, tmp_path):
+    """The vehicle geometry file ModelServer reads is an input file like the others: a
+    bad one fails the run with its ``file:line:`` message, never a traceback (which the
+    log of the failing component used to print)."""
+    root = Path(__file__).resolve().parents[2]
+    config = tmp_path / "raptor.xml"
+    config.write_text((root / "configs" / "raptor.xml").read_text().replace(
+        'value="050917raptor01.XML"', f'value="{geometry}"'))
+    result = subprocess.run(
+        [sys.executable, "-m", "afa", "run", str(config), "--sim", "--fast", "--duration",
+         "1"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 1, result.stderr
+    shown = geometry if geometry.startswith("/") else str(tmp_path / geometry)
+    assert f"modelServer: ConfigError: {shown}:" in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr, result.stderr

@@ -189,6 +189,29 @@ def test_decode_into_a_closed_pipe_ends_quietly(tmp_path):
     assert json.loads(first)["type"] and err == ""
 
 
+def test_decode_streams_what_it_reads(tmp_path):
+    """`afa decode` reads its input as a stream: messages come out while the input is
+    still open, and memory stays bounded on an endless one (`/dev/zero`, a serial port,
+    a pipe), which used to be read whole first (2.6 GB of memory in 8 s on /dev/zero)."""
+    import select
+
+    process = subprocess.Popen([sys.executable, "-m", "afa", "decode", "gps", "-"],
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, cwd=ROOT)
+    assert process.stdin is not None and process.stdout is not None
+    with process:
+        process.stdin.write(GPS_CAPTURE.read_bytes())
+        process.stdin.flush()  # and the input stays open
+        ready, _, _ = select.select([process.stdout], [], [], 60.0)  # (a hang guard only)
+        first = process.stdout.readline() if ready else b""
+        process.stdin.close()
+        rest = process.stdout.read()
+        assert process.wait(timeout=60) == 0
+    assert json.loads(first)["type"] == "Prompt"
+    assert json.loads(rest.splitlines()[-1])["statistics"]["bytes"] == \
+        len(GPS_CAPTURE.read_bytes())
+
+
 def test_decode_with_the_wrong_device_says_nothing_was_decoded(capsys):
     assert main(["decode", "imu", str(GPS_CAPTURE)]) == 1
     out, err = capsys.readouterr()
@@ -278,3 +301,38 @@ def test_run_help_lists_the_shipped_worlds(capsys):
     out = " ".join(capsys.readouterr().out.split())  # argparse wraps the help text
     for world in ("rock-field", "open-field", "slalom"):
         assert world in out.replace("- ", "-")
+
+
+def test_the_reference_course_is_planned_after_the_system_stopped(tmp_path, monkeypatch,
+                                                                  capsys):
+    """Planning the shortest course (the run summary's path ratio) takes seconds of CPU
+    on one thread: done while the components still ran, it starved the drivers of a
+    real-time `--sim` run, which then ended with every link "lost" and the command
+    watchdog's warnings. It is planned once the system has stopped."""
+    from components.simulation import RaptorSimulation
+
+    planned = RaptorSimulation.course_reference
+    states = []
+
+    def course_reference(self):
+        states.append({c.state.value for c in self.system.components.values()})
+        return planned(self)
+
+    monkeypatch.setattr(RaptorSimulation, "course_reference", course_reference)
+    summary = tmp_path / "summary.json"
+    assert main(["run", str(RAPTOR), "--sim", "--fast", "--world", "short-hop",
+                 "--duration", "1", "--summary", str(summary)]) == 0  # cut short: no verdict
+    assert states == [{"stopped"}]
+    data = json.loads(summary.read_text())
+    assert data["oracle_distance_m"] > 20.0 and data["path_ratio"] is None
+    assert "mission: NOT complete" in capsys.readouterr().out
+
+
+def test_a_run_in_which_nothing_drives_and_nothing_ends_is_refused(capsys):
+    """`--teleop` on a world without a <drive> script: nothing would drive and the run
+    would never end (it used to go on, silently, at full CPU under --fast)."""
+    assert main(["run", str(RAPTOR), "--sim", "--fast", "--world", "short-hop",
+                 "--teleop"]) == 2
+    err = capsys.readouterr().err
+    assert "world 'short-hop' has no <drive> script for --teleop" in err
+    assert "--duration" in err

@@ -6,6 +6,7 @@ from typing import Any
 import pytest
 
 from afa import (
+    AfaError,
     Component,
     ComponentError,
     Fault,
@@ -251,6 +252,25 @@ async def test_an_observer_that_raises_never_fails_or_slows_the_publisher(caplog
     assert any("observer broken failed" in r.getMessage() for r in caplog.records)
 
 
+async def test_an_observer_whose_callback_raises_cancelled_error_keeps_observing(caplog):
+    """A CancelledError the callback raises (nobody cancelled the observer) is one more
+    error, counted and logged: it does not end the observer silently."""
+    clock = VirtualClock(start=0.0)
+    seen = []
+
+    def leaky(event):
+        seen.append(event.body.n)
+        if len(seen) == 3:
+            raise asyncio.CancelledError
+
+    async with System([Ticker("Ticker", "A")], clock=clock) as system:
+        observer = system.observe(leaky, name="leaky")
+        await clock.advance(2.0)
+        stats = observer.statistics()
+    assert stats["errors"] == 1 and len(seen) >= 20
+    assert any("observer leaky failed" in r.getMessage() for r in caplog.records)
+
+
 async def test_a_slow_observer_drops_and_counts_instead_of_slowing_anyone():
     clock = VirtualClock(start=0.0)
     ticker, recorder = Ticker("Ticker", "A"), Recorder("Recorder", "A")
@@ -390,6 +410,118 @@ async def test_a_handler_that_ends_any_other_way_than_returning_fails_its_compon
         await until(lambda: leaky.seen >= 7, clock, timeout=5.0)  # receiving again
     assert isinstance(leaky.last_error, ComponentError)
     assert "the handler of 'A' raised" in str(leaky.last_error)
+
+
+@pytest.mark.parametrize("where", ["run", "a spawned task"])
+async def test_a_cancelled_error_from_the_components_own_code_fails_it(where):
+    """Issue 16, defect 5, beyond handlers: run() or a task the component spawned that
+    ends with a CancelledError nobody asked for (say, from awaiting a helper's cancelled
+    future) fails the component, which is restarted: it is neither left STOPPING for
+    good nor left RUNNING and healthy with its task gone."""
+    clock = VirtualClock(start=0.0)
+
+    class Quitter(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.lives = 0
+
+        async def run(self):
+            self.lives += 1
+
+            async def give_up():
+                await self.clock.sleep(0.5)
+                raise asyncio.CancelledError  # not cancelled by anyone
+
+            if where == "run":
+                await give_up()
+            else:
+                self.spawn(give_up(), "helper")
+
+    quitter = Quitter("Quitter")
+    async with System([quitter], clock=clock,
+                      restart_policy=RestartPolicy(initial=0.1)) as system:
+        await clock.advance(1.0)
+        health = system.health()["Quitter"]
+        assert quitter.failures >= 1 and quitter.restarts >= 1, health
+        assert quitter.lives >= 2
+    assert isinstance(quitter.last_error, ComponentError)
+    assert "CancelledError without being cancelled" in str(quitter.last_error)
+
+
+async def test_a_setup_that_raises_cancelled_error_fails_to_start():
+    class Quitter(SubscribePublishServer):
+        async def setup(self):
+            raise asyncio.CancelledError  # not cancelled by anyone
+
+    with pytest.raises(StartupError, match="raised CancelledError without being cancelled"):
+        async with asyncio.timeout(60):  # (before: the start never ended)
+            async with System([Quitter("Quitter")], clock=VirtualClock(start=0.0)):
+                pass
+
+
+async def test_a_server_that_stops_during_a_call_gives_its_caller_an_error():
+    """A servant that awaits something its teardown cancels (an acknowledgement, say)
+    hands the caller an afa error, not a CancelledError: the caller is not being
+    cancelled, so a cancellation would now fail it (and used to end its task silently)."""
+    clock = VirtualClock(start=0.0)
+
+    class Slow(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.serves(TickSource, name)
+            self.pending: asyncio.Future[Tick] | None = None
+
+        async def getTick(self):
+            self.pending = asyncio.get_running_loop().create_future()
+            return await self.pending  # answered by a device that never answers
+
+        async def teardown(self):
+            if self.pending is not None:
+                self.pending.cancel()
+
+    class Caller(SubscribePublishServer):
+        def __init__(self, name):
+            super().__init__(name)
+            self.source = self.uses(TickSource, "Slow")
+            self.errors: list[Exception] = []
+
+        async def run(self):
+            async def ask():
+                await self.bound(self.source)
+                try:
+                    await self.source.getTick()
+                except AfaError as exc:
+                    self.errors.append(exc)
+
+            self.spawn(ask(), "ask")
+
+    slow, caller = Slow("Slow"), Caller("Caller")
+    async with System([slow, caller], clock=clock) as system:
+        await until(lambda: slow.pending is not None, clock, timeout=1.0)
+        await system.stop_component("Slow")
+        await until(lambda: caller.errors, clock, timeout=1.0)
+        assert system.health()["Caller"].healthy and caller.failures == 0
+    assert "Slow.getTick" in str(caller.errors[0])
+
+
+async def test_stopping_a_component_whose_task_it_cancels_itself_is_no_failure():
+    """A component may cancel a task it spawned (a helper it no longer needs): that is
+    not a failure; neither is stopping the component while its tasks run."""
+    clock = VirtualClock(start=0.0)
+
+    class Tidy(SubscribePublishServer):
+        async def run(self):
+            helper = self.spawn(self.clock.sleep(100.0), "helper")
+            await self.clock.sleep(0.5)
+            helper.cancel()
+            self.spawn(self.clock.sleep(100.0), "another")
+
+    tidy = Tidy("Tidy")
+    async with System([tidy], clock=clock) as system:
+        await clock.advance(2.0)
+        assert system.health()["Tidy"].healthy
+        await system.stop_component("Tidy")
+    assert tidy.failures == 0 and tidy.state is State.STOPPED
 
 
 async def test_statistics_after_a_failed_setup_never_raise():

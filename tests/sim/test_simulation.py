@@ -167,3 +167,31 @@ async def test_the_least_clearance_is_the_least_over_every_physics_step(monkeypa
     assert math.isfinite(simulation.clearance)
     assert simulation.clearance == min(every_step)
     assert mismatches == []
+
+
+def test_the_hazard_field_is_built_before_the_system_starts(monkeypatch):
+    """The clearance field takes a CPU-bound half second on a big world: built when the
+    physics started, with the drivers already running on the wall clock of a real-time
+    `--sim` run, it starved them (the MPC555 link "lost" for 0.6 s at start-up). It is
+    built with the simulation, before anything runs."""
+    import components.simulation as simulation
+    from afa.cli import main
+    from afa.system import System
+
+    order: list[str] = []
+    field, start = simulation.HazardField, System.start
+
+    def hazard_field(*args, **kwargs):
+        order.append("hazards")
+        return field(*args, **kwargs)
+
+    async def system_start(self):
+        order.append("system")
+        await start(self)
+
+    monkeypatch.setattr(simulation, "HazardField", hazard_field)
+    monkeypatch.setattr(System, "start", system_start)
+    config = Path(__file__).resolve().parents[2] / "configs" / "raptor.xml"
+    assert main(["run", str(config), "--sim", "--fast", "--world", "short-hop",
+                 "--duration", "0.5"]) == 0
+    assert order[:2] == ["hazards", "system"], order
