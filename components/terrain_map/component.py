@@ -25,12 +25,12 @@
   after the pose frame's origin moved) are routine: counted as ``before_pose``.
 - Placement (:mod:`components.terrain_map.stabiliser`): a 2.5-D map stitches scans
   taken seconds apart, so the vehicle's position must be consistent over seconds, which
-  the GPS's (the RT-20's correlated decimetres) is not. Scans are placed with a position
-  predicted from the vehicle's own motion (the rear axle's distance rolled, from
-  ``OdometryEventName``'s wheel reports, along its x axis from the IMU's attitude) and
-  pulled towards the GPS's position with a time constant: 10 s horizontally, 600 s for
-  the height. Without odometry the horizontal position is the GPS's and the height
-  follows the forward part of its motion times the slope.
+  the GPS's (the RT-20's correlated decimetres) is not. Scans are placed with a height
+  predicted from the vehicle's motion (the forward part of the measured motion times
+  the slope of its x axis, from the IMU's attitude) and pulled towards the GPS's with
+  600 s. When ``OdometryEventName`` names the wheel reports (off in the shipped
+  configuration, decision 0033), the whole position is predicted from the rear axle's
+  distance rolled along that axis, and pulled towards the GPS's with 10 s horizontally.
 - The *global* map (``Depth`` × ``Width`` at ``Gridsize``, frame ``World``: metres from
   ``initialUTM``, north up) scrolls with the vehicle, centred on the ground frame (the
   front bumper), so the ego view ahead stays inside it. The *ego* map

@@ -546,7 +546,7 @@ async def test_a_gps_jump_does_not_move_the_scans_taken_after_it(odometry):
 
 
 async def test_malformed_odometry_is_counted_and_ignored():
-    async with rig() as r:
+    async with rig(OdometryEventName="RaptorOdometry") as r:
         await r.drive(1, world=None)
         r.system.channel.publish("Raptor", "RaptorOdometry", WheelDataIDL.model_construct(
             time=TimeIDL.from_seconds(r.clock.now()), leftDistance=float("nan"),

@@ -119,7 +119,7 @@ def test_reversing_moves_the_placement_backwards():
 
 def test_without_odometry_the_placement_is_the_gps_position():
     """No wheel reports (or stale ones): horizontally the measured position, as before
-    decision 0032; the height still follows the forward motion times the slope."""
+    decision 0033; the height still follows the forward motion times the slope."""
     s = PoseStabiliser()
     for k in range(30):
         t = k * DT
