@@ -1,5 +1,5 @@
 """Measure where the maps put the world: the registration figures of docs/maps.md and
-decision 0025.
+decisions 0025 and 0033.
 
 Two measurements, each in virtual time (seed 0, deterministic):
 
@@ -11,10 +11,13 @@ A shift that flips sign with the direction of travel is a timing error; one that
 not is geometry (or the GPS's own error, which ``--gps-noise off`` takes out).
 
 ``--world W [--teleop]``: the world's mission (or drive script) and the maps' quality
-figures of the run summary with the pose error, with or without the GPS's noise.
+figures of the run summary with the pose error, with or without the GPS's noise, and
+how the published pose and the Terrain Map's placement of the vehicle (decision 0033)
+err against the truth: RMS, and the RMS of their change over 1, 3 and 10 s.
 
     python docs/measure_map_registration.py --speed 1.5 [--gps-noise off]
     python docs/measure_map_registration.py --world alternating-ditches [--gps-noise off]
+    python docs/measure_map_registration.py --world alternating-ditches --gps-noise vertical
 """
 
 from __future__ import annotations
@@ -47,15 +50,23 @@ async def _run(simulation: RaptorSimulation, seconds: float | None,
     """Run, recording the truth every physics step and every published pose."""
     truth: list[tuple[float, float, float]] = []
     poses: list[tuple[float, float, float, Any]] = []
+    placed: list[tuple[float, float, float, float, float, float, float]] = []
     async with simulation:
         clock = simulation.clock
         channel = simulation.system.channel
         subscription = channel.subscribe("Raptor", "Pose", maxsize=1_000_000)
+        terrain_map = simulation.system.components["TerrainService"]
 
         async def record() -> None:
-            async for _ in clock.periodic(0.02):
+            async for k, _ in aenumerate(clock.periodic(0.02)):
                 state = simulation.state
                 truth.append((clock.now(), state.east, state.north))
+                pose = terrain_map.pose
+                if k % 10 == 0 and pose is not None:  # the Terrain Map's placement
+                    placed.append((clock.now(), state.east, state.north,
+                                   float(pose.HTransform[0][3]), float(pose.HTransform[1][3]),
+                                   float(terrain_map.stable[0, 3]),
+                                   float(terrain_map.stable[1, 3])))
 
         task = asyncio.ensure_future(record())
         await simulation.system.run(seconds, until=until)
@@ -64,9 +75,37 @@ async def _run(simulation: RaptorSimulation, seconds: float | None,
             pose = event.body
             poses.append((pose.time.to_seconds(), float(pose.HTransform[0][3]),
                           float(pose.HTransform[1][3]), pose.initialUTM))
-        terrain = simulation.system.components["TerrainService"].latest_map.get()
+        terrain = terrain_map.latest_map.get()
         summary = simulation.summary()
-    return {"truth": np.array(truth), "poses": poses, "terrain": terrain, "summary": summary}
+    return {"truth": np.array(truth), "poses": poses, "terrain": terrain, "summary": summary,
+            "placed": np.array(placed)}
+
+
+async def aenumerate(iterator: Any) -> Any:
+    k = 0
+    async for item in iterator:
+        yield k, item
+        k += 1
+
+
+def placement(simulation: RaptorSimulation, run: dict[str, Any]) -> dict[str, Any]:
+    """How the published pose and the Terrain Map's placement of the vehicle (decision
+    0033) err against the truth, sampled every 0.2 s: RMS, and RMS of their change over
+    1, 3 and 10 s (what smears a map stitched over those times)."""
+    rows = run["placed"]
+    frame = MapFrame.of(simulation.world.origin, run["poses"][-1][3])
+    tx, ty = frame.to_map(rows[:, 1], rows[:, 2])
+    out: dict[str, Any] = {}
+    for name, cols in (("pose", (3, 4)), ("placement", (5, 6))):
+        error = np.column_stack([rows[:, cols[0]] - tx, rows[:, cols[1]] - ty])
+        figures = {"rms_m": round(float(np.sqrt((error ** 2).sum(1).mean())), 3)}
+        for lag in (1, 3, 10):
+            k = int(round(lag / 0.2))
+            change = error[k:] - error[:-k]
+            figures[f"change_{lag}s_rms_m"] = round(
+                float(np.sqrt((change ** 2).sum(1).mean())), 3)
+        out[name] = figures
+    return out
 
 
 def pose_lag(simulation: RaptorSimulation, run: dict[str, Any]) -> tuple[float, float]:
@@ -136,6 +175,7 @@ def mission(name: str, teleop: bool) -> None:
     run = asyncio.run(_run(simulation, simulation.time_limit, until=simulation.finished))
     summary = run["summary"]
     print(json.dumps({"world": name, "pose_error": summary["pose_error"],
+                      "placement": placement(simulation, run),
                       "hazards": summary["maps"]["hazards"]}, indent=1))
 
 
@@ -144,11 +184,20 @@ def main() -> None:
     parser.add_argument("--speed", type=float, default=1.5)
     parser.add_argument("--world", help="run this shipped world instead of the drive")
     parser.add_argument("--teleop", action="store_true", help="the world's drive script")
-    parser.add_argument("--gps-noise", choices=("on", "off"), default="on")
+    parser.add_argument("--gps-noise", choices=("on", "off", "horizontal", "vertical"),
+                        default="on", help="the GPS's error: all, none, or one part only")
     args = parser.parse_args()
+    noise = gps_emulator.GPS_NOISE
     if args.gps_noise == "off":
         gps_emulator.GPS_NOISE = GpsNoise(horizontal=0.0, vertical=0.0, velocity=0.0,
                                           satellite_step_rate=0.0)
+    elif args.gps_noise == "horizontal":
+        gps_emulator.GPS_NOISE = GpsNoise(horizontal=noise.horizontal, vertical=0.0,
+                                          velocity=0.0, satellite_step_rate=0.0)
+    elif args.gps_noise == "vertical":
+        gps_emulator.GPS_NOISE = GpsNoise(horizontal=0.0, vertical=noise.vertical,
+                                          velocity=noise.velocity,
+                                          satellite_step_rate=noise.satellite_step_rate)
     if args.world:
         mission(args.world, args.teleop)
     else:

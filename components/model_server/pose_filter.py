@@ -591,7 +591,7 @@ class PoseFilter:
         if self._origin is None:
             raise PoseUnavailableError("the pose filter has no GPS fix yet")
         return _transform_from(initial_utm, self.east, self.north, self._elevation,
-                               self.tuning.antenna_offset[2], self.heading, self._pitch,
+                               self._levelled_lever()[2], self.heading, self._pitch,
                                self._roll)
 
     # -- explicit initialisation ------------------------------------------------------------
@@ -786,7 +786,7 @@ class PoseFilter:
         tu = self.tuning
         self.predict(t)
         variance = std_m * std_m
-        ax, ay, _ = tu.antenna_offset
+        ax, ay, _ = self._levelled_lever()
         lever = math.hypot(ax, ay)
 
         if self._origin is None:
@@ -823,7 +823,7 @@ class PoseFilter:
                              lever: float) -> bool:
         tu = self.tuning
         assert self._origin is not None
-        ax, ay, _ = tu.antenna_offset
+        ax, ay, _ = self._levelled_lever()
         yaw = float(self._x[IX_YAW])
         c, s = math.cos(yaw), math.sin(yaw)
         hm = np.zeros((2, STATE_SIZE))
@@ -857,6 +857,14 @@ class PoseFilter:
             self._stop_anchor = None
             return True
         return False
+
+    def _levelled_lever(self) -> tuple[float, float, float]:
+        """The antenna lever arm turned by the IMU's pitch and roll (the heading is the
+        state's, turned in the measurement model): on a 13° slope the antenna 1.75 m up
+        leans 0.39 m downhill of the axle, which a level lever arm put into the pose."""
+        rotation = homogeneous_transform(0.0, 0.0, 0.0, 0.0, self._pitch, self._roll)[:3, :3]
+        x, y, z = rotation @ np.asarray(self.tuning.antenna_offset, dtype=np.float64)
+        return float(x), float(y), float(z)
 
     def _antenna_velocity(self) -> tuple[float, float]:
         """Antenna velocity in the vehicle frame: (v - w a_y, w a_x) (lever arm a)."""

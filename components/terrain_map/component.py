@@ -23,14 +23,14 @@
   as long as the latest pose is marked invalid, and as long as ModelServer does not
   know the ground frame. Scans that arrive before the map's first pose (at start, or
   after the pose frame's origin moved) are routine: counted as ``before_pose``.
-- Vertical stabilisation: a 2.5-D map stitches scans taken seconds apart, so the
-  vehicle's height must be consistent over seconds, which a GPS elevation (0.3 m of
-  correlated noise for the Raptor's RT-20) is not: scans of flat ground would pile up
-  into half-metre "steps". The map therefore places scans with the vehicle's height
-  predicted from its own motion (the distance driven times the slope of its x axis,
-  from the IMU's attitude) and pulled towards the GPS height with a ``HEIGHT_TIME``
-  time constant: heights are locally consistent and follow the ground, their absolute
-  level drifts slowly (irrelevant to hazards, which are differences).
+- Placement (:mod:`components.terrain_map.stabiliser`): a 2.5-D map stitches scans
+  taken seconds apart, so the vehicle's position must be consistent over seconds, which
+  the GPS's (the RT-20's correlated decimetres) is not. Scans are placed with a height
+  predicted from the vehicle's motion (the forward part of the measured motion times
+  the slope of its x axis, from the IMU's attitude) and pulled towards the GPS's with
+  600 s. When ``OdometryEventName`` names the wheel reports (off in the shipped
+  configuration, decision 0033), the whole position is predicted from the rear axle's
+  distance rolled along that axis, and pulled towards the GPS's with 10 s horizontally.
 - The *global* map (``Depth`` × ``Width`` at ``Gridsize``, frame ``World``: metres from
   ``initialUTM``, north up) scrolls with the vehicle, centred on the ground frame (the
   front bumper), so the ego view ahead stays inside it. The *ego* map
@@ -67,6 +67,7 @@ from components.terrain_map.grid import (
     ego_map_pose,
 )
 from components.terrain_map.parameters import TerrainMapParameters
+from components.terrain_map.stabiliser import PoseStabiliser
 from components.trusted import trusted
 from idl import (
     EgoMapArrayEventIDL,
@@ -81,55 +82,19 @@ from idl import (
     Range3dSeqEventIDL,
     Range3dStereoEventIDL,
     TimeIDL,
+    WheelDataIDL,
 )
 
-__all__ = ["TerrainMap", "VEHICLE_FRAME", "PENDING_LIMIT", "POSE_BUFFER", "HEIGHT_TIME",
-           "HeightStabiliser"]
+__all__ = ["TerrainMap", "VEHICLE_FRAME", "PENDING_LIMIT", "POSE_BUFFER"]
 
 VEHICLE_FRAME = "Raptor:RearAxleCenter"
 #: A scan newer than the newest pose waits this long (s) for the pose that follows it.
 PENDING_LIMIT = 0.5
 #: Poses kept for placing scans (ModelServer publishes ~14 a second: ~18 s).
 POSE_BUFFER = 256
-#: Time constant (s) with which the stabilised vehicle height follows the pose's.
-HEIGHT_TIME = 600.0
 _LASER = (Range3dSeqEventIDL, Range3dLaserIDL)
 _STEREO = (Range3dArrayEventIDL, Range3dStereoEventIDL)
 _RangeEvent = Range3dSeqEventIDL | Range3dLaserIDL | Range3dArrayEventIDL | Range3dStereoEventIDL
-
-
-class HeightStabiliser:
-    """The vehicle's height for stitching scans: predicted from its motion, pulled towards
-    the measured height with time constant ``tau`` (module docstring)."""
-
-    def __init__(self, tau: float = HEIGHT_TIME) -> None:
-        self.tau = tau
-        self._last: tuple[float, np.ndarray] | None = None
-        self.height = 0.0
-
-    def reset(self) -> None:
-        self._last = None
-
-    def __call__(self, time: float, world_from_vehicle: np.ndarray) -> np.ndarray:
-        """``world_from_vehicle`` with its height replaced by the stabilised one."""
-        pose = np.array(world_from_vehicle, dtype=np.float64)
-        measured = float(pose[2, 3])
-        # a second pose at the same stamp (a GPS fix and an IMU sample of one instant)
-        # continues the filter with dt = 0; only time going back starts it again
-        if self._last is None or time < self._last[0]:
-            self.height = measured
-        else:
-            t0, previous = self._last
-            dt = time - t0
-            axis = pose[:3, 0]  # the vehicle's x axis in the world
-            level = math.hypot(axis[0], axis[1])
-            moved = pose[:2, 3] - previous[:2, 3]
-            forward = float(moved @ axis[:2]) / level if level > 1e-9 else 0.0
-            predicted = self.height + forward * float(axis[2]) / max(level, 1e-9)
-            self.height = predicted + dt / (self.tau + dt) * (measured - predicted)
-        self._last = (time, pose.copy())
-        pose[2, 3] = self.height
-        return pose
 
 
 def frame_name(text: str) -> str:
@@ -157,13 +122,15 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
                 self.subscribes(event_name, types, self._on_scan, maxsize=64)
         self.subscribes(p.PoseEventName, PoseTransformIDL, self._on_pose, maxsize=64,
                         required=True)
+        if p.OdometryEventName:
+            self.subscribes(p.OdometryEventName, WheelDataIDL, self._on_odometry, maxsize=64)
         self.serves(Map, p.EventName)
         self.platform = self.uses(Platform, p.PlatformEvent)
         g = p.Gridsize / 1000.0
         self.grid = TerrainGrid.centred(0.0, 0.0, p.Depth / 1000.0, p.Width / 1000.0, g)
         self.ego = EgoView.ahead(p.EgoDepth / 1000.0, p.EgoWidth / 1000.0, g)
         self.poses = PoseBuffer(POSE_BUFFER, PoseAudit.from_parameters(p))
-        self.heights = HeightStabiliser()
+        self.stabiliser = PoseStabiliser()
         self.stable = np.eye(4)  # the latest pose with the stabilised height
         self.stereo = StereoBalance(p.StereoPeriod)
         self.frames: dict[str, np.ndarray | None] = {}
@@ -178,8 +145,8 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
                          "points_nonfinite": 0, "invalid_poses": 0, "too_old": 0,
                          "future_dropped": 0, "implausible": 0, "unknown_frames": 0,
                          "no_geometry": 0, "malformed_scans": 0, "malformed_poses": 0,
-                         "future_poses": 0, "before_pose": 0, "maps_published": 0,
-                         "resets": 0}
+                         "future_poses": 0, "malformed_odometry": 0, "before_pose": 0,
+                         "maps_published": 0, "resets": 0}
 
     async def setup(self) -> None:
         self.latest_map = self.slot("terrain map")
@@ -250,7 +217,7 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
             self._reset()
         if self._first_pose is None:
             self._first_pose = stamp
-        self.stable = self.heights(stamp, pose.HTransform)
+        self.stable = self.stabiliser(stamp, pose.HTransform)
         self.poses.add(stamp, self.stable)  # audited (and counted) there
         self.pose = pose
         ground = self.frames.get(self.ground_frame)
@@ -258,6 +225,15 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
             else pose.HTransform[:3, 3]
         self.grid.recentre(float(bumper[0]), float(bumper[1]), slack=2)
         self._retry_pending()
+
+    def _on_odometry(self, event: Event) -> None:
+        wheels: WheelDataIDL = event.body  # type: ignore[assignment]
+        values = (wheels.time.to_seconds(), wheels.leftDistance, wheels.rightDistance,
+                  wheels.leftSpeed, wheels.rightSpeed, wheels.steeringAngle)
+        if not all(math.isfinite(v) for v in values):
+            self._bad("malformed_odometry", f"malformed {event.type} reports (ignored)")
+            return
+        self.stabiliser.odometry.add(*values)
 
     async def _on_scan(self, event: Event) -> None:
         scan: _RangeEvent = event.body  # type: ignore[assignment]
@@ -352,7 +328,7 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
     def _reset(self) -> None:
         self.grid.reset()
         self.poses = PoseBuffer(POSE_BUFFER, self.poses.audit)
-        self.heights.reset()
+        self.stabiliser.reset()
         self.counters["before_pose"] += len(self._pending)
         self._pending.clear()
         self._first_pose = None
@@ -397,6 +373,8 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
         stats.update(self.counters)
         stats["pending_scans"] = len(self._pending)
         stats["poses"] = dict(self.poses.statistics)
+        stats["placement"] = {**self.stabiliser.counts,
+                              "odometry_restarts": self.stabiliser.odometry.restarts}
         return stats
 
     # -- Map (Table 12) ----------------------------------------------------------------------

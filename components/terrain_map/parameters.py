@@ -34,6 +34,12 @@ class TerrainMapParameters(Parameters):
     RangeEventName2: str = param("Laser12", unit="-", description="Subscribed Range Event")
     RangeEventName3: str = param("Stereo", unit="-", description="Subscribed Range Event")
     PoseEventName: str = param("Pose", unit="-", description="Subscribed Pose Event")
+    OdometryEventName: str = param(
+        "", unit="-",
+        description="afa addition: subscribed wheel odometry event (e.g. RaptorOdometry); "
+                    "the distance rolled between poses keeps the map's placement of the "
+                    "vehicle consistent over seconds where the GPS wanders (decision 0033); "
+                    "empty (the default): the GPS position")
     MapEventInterval: Annotated[float, Field(gt=0)] = param(
         0.25, unit="s", description="Create map events on a timed interval, sec.")
     MapUpdateTime: Annotated[float, Field(ge=0)] = param(

@@ -32,6 +32,7 @@ from idl import (
     Range3dLaserIDL,
     Range3dSeqEventIDL,
     TimeIDL,
+    WheelDataIDL,
 )
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -506,20 +507,53 @@ async def test_a_scan_waiting_for_its_pose_is_fused_whatever_the_frame_spelling(
     assert stats["scans"] == 1 and stats["points_fused"] == len(PATCH)
 
 
-def test_a_second_pose_at_the_same_stamp_does_not_restart_the_height_filter():
-    """A GPS fix and an IMU sample of one instant make two poses with one stamp: the
-    second continues the filter (dt = 0, no pull) instead of jumping to its measured
-    height; only time going back starts the filter again."""
-    from components.terrain_map.component import HeightStabiliser
+# --- placement: the wheels keep scans together where the GPS wanders ------------------
 
-    def at(z: float) -> np.ndarray:
-        pose = np.eye(4)
-        pose[2, 3] = z
-        return pose
 
-    heights = HeightStabiliser(tau=2.0)
-    assert heights(10.0, at(0.0))[2, 3] == 0.0
-    assert heights(11.0, at(0.3))[2, 3] == pytest.approx(0.1)  # 1 / (2 + 1) of the way
-    assert heights(11.0, at(0.9))[2, 3] == pytest.approx(0.1)  # same stamp: held
-    assert heights(12.0, at(0.4))[2, 3] == pytest.approx(0.2)  # pulled on from 0.1
-    assert heights(5.0, at(0.7))[2, 3] == 0.7  # back in time: starts again
+@pytest.mark.parametrize("odometry", ["RaptorOdometry", ""], ids=["wheels", "no wheels"])
+async def test_a_gps_jump_does_not_move_the_scans_taken_after_it(odometry):
+    """The vehicle stands still; at t = 2 s the GPS fix jumps 0.3 m north. A point at
+    world (5.1, 0.1) scanned before and after: with wheel reports the map keeps it in
+    its cell (the placement takes the jump in over 10 s, 3 cm in the first second);
+    without them it lands 0.3 m north, in the cell two along."""
+    from components.terrain_map.stabiliser import PLANE_TIME
+    point = np.array([[5.1, 0.1, 0.2]])
+    async with rig(OdometryEventName=odometry) as r:
+        for k in range(40):
+            t = r.clock.now()
+            r.system.channel.publish("Raptor", "RaptorOdometry", WheelDataIDL(
+                time=TimeIDL.from_seconds(t), leftDistance=3.0, rightDistance=3.0,
+                leftSpeed=0.0, rightSpeed=0.0, steeringAngle=0.0))
+            gps = vehicle_pose(0.0, 0.3 if k >= 20 else 0.0)
+            r.publish_pose(t, gps)
+            if k >= 10:  # the scan of the point from where the vehicle really is
+                r.system.channel.publish("Raptor", "Laser11", Range3dSeqEventIDL(
+                    time=TimeIDL.from_seconds(t), sensorId=11, frame=LEFT,
+                    points=r.laser_points(point)))
+            await r.clock.sleep(DT)
+        await r.clock.sleep(1.0)
+        terrain = await r.map()
+        stats = r.stats()
+    counts = {y: int(terrain.pointCount[cell(terrain, 5.0, y)]) for y in (0.0, 0.2, 0.4)}
+    if odometry:
+        drift = 0.3 * (1 - (1 - DT / (PLANE_TIME + DT)) ** 20)  # after the last pose
+        assert 0.1 + drift < 0.2  # so every scan stays in the point's cell
+        assert counts == {0.0: 30, 0.2: 0, 0.4: 0}
+        assert stats["placement"]["odometry"] >= 38
+    else:
+        assert counts == {0.0: 10, 0.2: 0, 0.4: 20}
+        assert stats["placement"]["odometry"] == 0
+
+
+async def test_malformed_odometry_is_counted_and_ignored():
+    async with rig(OdometryEventName="RaptorOdometry") as r:
+        await r.drive(1, world=None)
+        r.system.channel.publish("Raptor", "RaptorOdometry", WheelDataIDL.model_construct(
+            time=TimeIDL.from_seconds(r.clock.now()), leftDistance=float("nan"),
+            rightDistance=0.0, leftSpeed=0.0, rightSpeed=0.0, steeringAngle=0.0))
+        await r.drive(3)
+        stats = r.stats()
+        health = r.health()
+    assert stats["malformed_odometry"] == 1
+    assert stats["scans"] == 3
+    assert "malformed RaptorOdometry" in health.detail
