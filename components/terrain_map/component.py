@@ -18,7 +18,7 @@
   component unhealthy for ``BAD_INPUT_WINDOW`` seconds, its detail naming what was
   refused: non-finite points (dropped; the scan's finite points are fused), a scan in a
   frame ModelServer does not know, a scan older than the pose buffer, a scan in a pose
-  jump, a scan no pose came for within ``PENDING_LIMIT``, a malformed scan or pose (one
+  jump, a scan for which no pose came within ``PENDING_LIMIT``, a malformed scan or pose (one
   that bypassed the IDL's validation), a pose stamped in the future. It is unhealthy
   as long as the latest pose is marked invalid, and as long as ModelServer does not
   know the ground frame. Scans that arrive before the map's first pose (at start, or
@@ -305,8 +305,8 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
             self._drop_late(self._pending.popleft()[1])
 
     def _drop_late(self, event: Event) -> None:
-        self._bad("future_dropped", f"{event.type} scans no pose came for within "
-                                    f"{PENDING_LIMIT:g} s (dropped)")
+        self._bad("future_dropped", f"{event.type} scans dropped: no pose came within "
+                                    f"{PENDING_LIMIT:g} s of them")
 
     async def _transform(self, frame: str) -> np.ndarray | None:
         """^V T_frame from ModelServer, polled once per frame (None if unknown)."""

@@ -486,7 +486,7 @@ async def test_scans_no_pose_comes_for_are_dropped_not_hoarded():
         stats, health = r.stats(), r.health()
     assert stats["pending_scans"] == 0
     assert stats["future_dropped"] == 20
-    assert "no pose came for" in health.detail
+    assert "Laser11 scans dropped: no pose came within 0.5 s" in health.detail
     assert PENDING_LIMIT < 1.0
 
 
