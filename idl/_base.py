@@ -248,12 +248,12 @@ class Array:
     def _serialize(self, value: np.ndarray, info: Any) -> Any:
         context = info.context
         if type(context) is dict:  # the wire codec's context first: it is the hot path
-            buffers = context.get(WIRE_BUFFERS)
-            if buffers is not None and info.mode == "json":
+            wire_buffers = context.get(WIRE_BUFFERS)
+            if wire_buffers is not None and info.mode == "json":
                 contiguous = np.ascontiguousarray(value)
-                buffers.append(contiguous)
+                wire_buffers.append(contiguous)
                 return {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape),
-                        "$array": len(buffers) - 1}
+                        "$array": len(wire_buffers) - 1}
         if info.mode != "json":
             return value
         if context is _FINGERPRINT:

@@ -473,7 +473,7 @@ class ViewerConverter:
             in_frame, transform = pose_json(body)  # type: ignore[arg-type]
             return [(viewer_topic(event_type), "foxglove.PoseInFrame", in_frame),
                     (TF_TOPIC, "foxglove.FrameTransform", transform)]
-        if kind is ArcVoteIDL:
+        if type(body) is ArcVoteIDL:
             if not self._due(event_type, origin, body):
                 return []
             return [(viewer_topic(event_type), "foxglove.SceneUpdate", arc_votes_json(body))]
