@@ -300,7 +300,7 @@ class Recorder:
                 self._schema(type(body)),
                 {fmt.KIND: fmt.EVENT, "afa.domain": event.domain, "afa.event": event.type})
         nanoseconds = fmt.to_ns(event.time)
-        self._writer.add_message(channel, nanoseconds, event.encode(), nanoseconds,
+        self._writer.add_message(channel, nanoseconds, event.encode_parts(), nanoseconds,
                                  event.seq & 0xFFFFFFFF)
         self.events_written += 1
         self.written[event.type] += 1
