@@ -60,7 +60,7 @@ log = logging.getLogger("afa.log")
 VIEWER_GROUP = 1
 #: How long (s of clock time) the recorder lets events queue before recording them in
 #: one step (decision 0032).
-BATCH_PERIOD = 0.05
+BATCH_PERIOD = 0.1
 #: How often the geometry model's transforms are written again (s of clock time), so a
 #: viewer that opens the file in the middle finds them.
 STATIC_TF_PERIOD = 10.0
