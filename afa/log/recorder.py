@@ -253,10 +253,13 @@ class Recorder:
         self.finish()
 
     def finish(self) -> None:
-        """Stop observing and finish the file without draining (what is queued is
-        counted as dropped). Idempotent."""
+        """Stop observing and finish the file, without awaiting anything: the events
+        waiting in the buffer (up to a batch, :data:`BATCH_PERIOD`) and the polls are
+        recorded first. Idempotent."""
         if self.closed:
             return
+        if self._writer is not None:
+            self._drain_queue()
         self.closed = True
         if self._remove_hook is not None:
             self._remove_hook()
