@@ -63,9 +63,16 @@ class Event(NamedTuple):
         """The event as bytes: a small envelope (magic ``AFE1``, time f64, seq u64, the
         lengths of domain, type and origin), those three names in UTF-8, then the body's
         wire frame (:mod:`idl.wire`)."""
-        names = [self.domain.encode(), self.type.encode(), self.origin.encode()]
+        return b"".join(self.encode_parts())
+
+    def encode_parts(self) -> list[bytes | memoryview]:
+        """:meth:`encode` as a list of byte strings to write one after the other (the
+        arrays' bytes not copied; a recorder writes them straight into its chunk)."""
+        names = (self.domain.encode(), self.type.encode(), self.origin.encode())
         head = _ENVELOPE.pack(_EVENT_MAGIC, self.time, self.seq, *map(len, names))
-        return b"".join([head, *names, *wire.encode_parts(self.body)])
+        parts = wire.encode_parts(self.body)
+        parts[0] = b"".join((head, *names, parts[0]))
+        return parts
 
     @classmethod
     def decode(cls, data: bytes | bytearray | memoryview) -> Event:

@@ -18,9 +18,15 @@ takes a few minutes (valgrind is ~50 times slower than the program). Prints the 
 the count per simulated second and the run's event digest (of the warm-up and the
 measured seconds), as JSON with ``--json``.
 
+``--record`` attaches the recorder (``afa run --record``: every event, poll and viewer
+channel, zstd in its worker thread, whose instructions count too) before the start, so
+the difference of two runs is the recording's cost in instructions, whatever the load
+(decision 0032).
+
 Usage::
 
     python benchmarks/instructions.py [--stack sensing|autonomous] [--warm 2] [--duration 10]
+                                      [--record]
 """
 
 from __future__ import annotations
@@ -55,8 +61,10 @@ def build_shim(directory: Path) -> Path:
     return library
 
 
-async def _inner(stack: str, warm: float, duration: float, shim: Path) -> dict[str, Any]:
-    """The run under valgrind: warm up, zero the counters, run, dump them."""
+async def _inner(stack: str, warm: float, duration: float, shim: Path,
+                 record: Path | None = None) -> dict[str, Any]:
+    """The run under valgrind: warm up, zero the counters, run, dump them (``record``:
+    recorded into that file)."""
     import benchmarks.sim as sim_bench
     from afa import VirtualClock
     from components.simulation import RaptorSimulation
@@ -69,10 +77,17 @@ async def _inner(stack: str, warm: float, duration: float, shim: Path) -> dict[s
     simulation = RaptorSimulation.from_xml(sim_bench.CONFIG, sim_bench.world_path("rock-field"),
                                            clock=VirtualClock(), seed=0,
                                            teleop=types is not None, **options)
+    recorder = None
+    if record is not None:
+        from afa.log import Recorder
+
+        recorder = Recorder(record).attach(simulation.system)
     async with simulation:
         await simulation.system.run(warm)
         library.afa_cg_zero()
         await simulation.system.run(duration)
+        if recorder is not None:
+            await recorder.close()  # what the measured seconds queued, compressed
         library.afa_cg_dump()
     return {"event_digest": simulation.summary()["event_digest"]}
 
@@ -84,13 +99,17 @@ def main() -> None:
                         help="simulated seconds before counting (default 2)")
     parser.add_argument("--duration", type=float, default=10.0,
                         help="simulated seconds counted (default 10)")
+    parser.add_argument("--record", action="store_true",
+                        help="record the run (the recorder's instructions counted too)")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--inner", help=argparse.SUPPRESS)  # the shim's path, under valgrind
+    parser.add_argument("--inner-record", help=argparse.SUPPRESS)  # the file, under valgrind
     args = parser.parse_args()
     if args.inner:
         logging.disable(logging.WARNING)
+        record = Path(args.inner_record) if args.inner_record else None
         print(json.dumps(asyncio.run(_inner(args.stack, args.warm, args.duration,
-                                            Path(args.inner)))))
+                                            Path(args.inner), record))))
         return
 
     with tempfile.TemporaryDirectory(prefix="afa-instructions-") as tmp:
@@ -101,6 +120,8 @@ def main() -> None:
                    f"--callgrind-out-file={out}", sys.executable, str(Path(__file__).resolve()),
                    "--stack", args.stack, "--warm", str(args.warm), "--duration",
                    str(args.duration), "--inner", str(shim)]
+        if args.record:
+            command += ["--inner-record", str(directory / "recorded.mcap")]
         # OpenBLAS's worker threads spin while they wait, for as long as the (valgrind-
         # slowed, load-dependent) wall clock says: one thread makes the count repeatable.
         # A fixed hash seed makes dict and set layouts repeatable too.
@@ -115,14 +136,16 @@ def main() -> None:
         if found is None:
             raise SystemExit(f"no counts dumped (valgrind said:\n{done.stderr[-3000:]})")
         instructions = int(found.group(1))
-    result = {"stack": args.stack, "world": "rock-field", "seed": 0, "warm_s": args.warm,
+    result = {"stack": args.stack, "world": "rock-field", "seed": 0, "record": args.record,
+              "warm_s": args.warm,
               "duration_s": args.duration, "instructions": instructions,
               "instructions_per_sim_s": round(instructions / args.duration),
               **json.loads(done.stdout.strip().splitlines()[-1])}
     if args.json:
         print(json.dumps(result, indent=2))
         return
-    print(f"{args.stack}: {instructions / 1e9:.4f} G instructions in {args.duration:g} "
+    print(f"{args.stack}{' recorded' if args.record else ''}: "
+          f"{instructions / 1e9:.4f} G instructions in {args.duration:g} "
           f"simulated s after {args.warm:g} s of warm-up = "
           f"{result['instructions_per_sim_s'] / 1e6:.1f} M per simulated second "
           f"(event digest {result['event_digest'][:16]}...)")

@@ -27,6 +27,7 @@ registered IDL classes, and arrays are plain numeric buffers (object dtypes refu
 
 from __future__ import annotations
 
+import functools
 import struct
 from typing import Any, TypeVar
 
@@ -55,25 +56,39 @@ def encode_parts(model: IDLModel) -> list[bytes | memoryview]:
     """The frame as a list of byte strings to write one after the other (no copy of the
     array data; for writers that take several buffers)."""
     buffers: list[Any] = []
-    body = type(model).__pydantic_serializer__.to_json(model, context={WIRE_BUFFERS: buffers})
-    name = type_name(type(model)).encode()
-    parts: list[bytes | memoryview] = [
-        MAGIC + _U16.pack(len(name)) + name + _U32.pack(len(body)), body]
+    cls = type(model)
+    body = cls.__pydantic_serializer__.to_json(model, context={WIRE_BUFFERS: buffers})
+    name = _NAMES.get(cls)
+    if name is None:
+        name = _NAMES[cls] = type_name(cls).encode()
+    head = MAGIC + _U16.pack(len(name)) + name + _U32.pack(len(body))
     if not buffers:
-        parts.append(b"\x00\x00")
-        return parts
-    views = [memoryview(array).cast("B") if array.size else memoryview(b"")
-             for array in buffers]  # an empty array (a scan with no return) has no bytes
-    table = _U16.pack(len(views)) + b"".join(_U64.pack(v.nbytes) for v in views)
-    parts.append(table)
-    offset = sum(len(p) for p in parts)
-    for view in views:
+        return [head, body, b"\x00\x00"]
+    count = len(buffers)
+    table = _table(count).pack(count, *[array.nbytes for array in buffers])
+    parts: list[bytes | memoryview] = [head, body, table]
+    offset = len(head) + len(body) + len(table)
+    for array in buffers:
         pad = -offset % 8
         if pad:
-            parts.append(b"\x00" * pad)
-        parts.append(view)
-        offset += pad + view.nbytes
+            parts.append(_PADDING[pad])
+        nbytes = array.nbytes
+        # an empty array (a scan with no return) has no bytes
+        parts.append(memoryview(array).cast("B") if nbytes else _EMPTY)
+        offset += pad + nbytes
     return parts
+
+
+#: Each class's encoded type name (classes are never renamed once defined).
+_NAMES: dict[type, bytes] = {}
+_PADDING = [b"\x00" * n for n in range(8)]
+_EMPTY = memoryview(b"")
+
+
+@functools.lru_cache(maxsize=64)
+def _table(count: int) -> struct.Struct:
+    """The buffer table's layout: the count (u16), then each buffer's length (u64)."""
+    return struct.Struct(f"<H{count}Q")
 
 
 def encode(model: IDLModel) -> bytes:

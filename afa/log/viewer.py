@@ -62,7 +62,7 @@ from idl._base import IDLModel
 __all__ = ["WORLD_FRAME", "VEHICLE_FRAME", "TF_TOPIC", "SCHEMAS", "ViewerMessage",
            "VOTE_INTERVAL", "GRID_INTERVAL",
            "ViewerConverter", "pose_in_frame", "frame_transform", "point_cloud", "grid",
-           "point_cloud_json", "grid_json", "arc_votes", "arc_votes_json",
+           "point_cloud_json", "grid_json", "arc_votes", "arc_votes_json", "pose_json",
            "quaternion", "viewer_topic"]
 
 #: The frame ``Pose`` events place the vehicle in (x east, y north, origin initialUTM).
@@ -174,34 +174,40 @@ def _time(stamp: TimeIDL | float) -> dict[str, int]:
 
 def quaternion(rotation: np.ndarray) -> dict[str, float]:
     """The unit quaternion (x, y, z, w) of a 3x3 rotation matrix (w ≥ 0)."""
-    m = rotation
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    x, y, z, w = _quaternion(np.asarray(rotation, dtype=float)[:3, :3].tolist())
+    return {"x": x, "y": y, "z": z, "w": w}
+
+
+def _quaternion(m: list[list[float]]) -> tuple[float, float, float, float]:
+    """:func:`quaternion` of a rotation given as nested lists of Python floats (the
+    same IEEE operations in the same order as on numpy scalars, several times faster)."""
+    trace = m[0][0] + m[1][1] + m[2][2]
     if trace > 0:
         s = 2.0 * math.sqrt(1.0 + trace)
-        w, x = 0.25 * s, (m[2, 1] - m[1, 2]) / s
-        y, z = (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        w, x = (m[2, 1] - m[1, 2]) / s, 0.25 * s
-        y, z = (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        w, x = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s
-        y, z = 0.25 * s, (m[1, 2] + m[2, 1]) / s
+        w, x = 0.25 * s, (m[2][1] - m[1][2]) / s
+        y, z = (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s
+    elif m[0][0] > m[1][1] and m[0][0] > m[2][2]:
+        s = 2.0 * math.sqrt(1.0 + m[0][0] - m[1][1] - m[2][2])
+        w, x = (m[2][1] - m[1][2]) / s, 0.25 * s
+        y, z = (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s
+    elif m[1][1] > m[2][2]:
+        s = 2.0 * math.sqrt(1.0 + m[1][1] - m[0][0] - m[2][2])
+        w, x = (m[0][2] - m[2][0]) / s, (m[0][1] + m[1][0]) / s
+        y, z = 0.25 * s, (m[1][2] + m[2][1]) / s
     else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        w, x = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s
-        y, z = (m[1, 2] + m[2, 1]) / s, 0.25 * s
+        s = 2.0 * math.sqrt(1.0 + m[2][2] - m[0][0] - m[1][1])
+        w, x = (m[1][0] - m[0][1]) / s, (m[0][2] + m[2][0]) / s
+        y, z = (m[1][2] + m[2][1]) / s, 0.25 * s
     norm = math.sqrt(w * w + x * x + y * y + z * z)
     sign = -1.0 if w < 0 else 1.0
-    return {"x": float(sign * x / norm), "y": float(sign * y / norm),
-            "z": float(sign * z / norm), "w": float(sign * w / norm)}
+    return sign * x / norm, sign * y / norm, sign * z / norm, sign * w / norm
 
 
 def _pose(transform: np.ndarray) -> dict[str, Any]:
-    return {"position": {"x": float(transform[0, 3]), "y": float(transform[1, 3]),
-                         "z": float(transform[2, 3])},
-            "orientation": quaternion(transform[:3, :3])}
+    rows = np.asarray(transform, dtype=float).tolist()
+    x, y, z, w = _quaternion(rows)
+    return {"position": {"x": rows[0][3], "y": rows[1][3], "z": rows[2][3]},
+            "orientation": {"x": x, "y": y, "z": z, "w": w}}
 
 
 def pose_in_frame(pose: PoseTransformIDL) -> dict[str, Any]:
@@ -216,6 +222,34 @@ def frame_transform(parent: str, child: str, transform: np.ndarray,
     pose = _pose(transform)
     return {"timestamp": _time(stamp), "parent_frame_id": parent, "child_frame_id": child,
             "translation": pose["position"], "rotation": pose["orientation"]}
+
+
+def _float_json(value: float) -> str:
+    """A finite float as json writes it (its repr); ValueError otherwise, as
+    ``dumps`` (``allow_nan=False``) raises for any other message."""
+    if not math.isfinite(value):
+        raise ValueError(f"Out of range float values are not JSON compliant: {value!r}")
+    return repr(value)
+
+
+def pose_json(pose: PoseTransformIDL) -> tuple[bytes, bytes]:
+    """``dumps`` of :func:`pose_in_frame` and of the world -> vehicle
+    :func:`frame_transform`, the same bytes (a test compares them), the quaternion
+    computed once and the documents written as text: a pose comes 14 times a second."""
+    rows = pose.HTransform.tolist()
+    x, y, z, w = map(_float_json, _quaternion(rows))
+    px, py, pz = _float_json(rows[0][3]), _float_json(rows[1][3]), _float_json(rows[2][3])
+    stamp = _time_json(pose.time)
+    position = f'{{"x":{px},"y":{py},"z":{pz}}}'
+    rotation = f'{{"x":{x},"y":{y},"z":{z},"w":{w}}}'
+    return (f'{{"timestamp":{stamp},"frame_id":{_WORLD_JSON},"pose":{{"position":'
+            f'{position},"orientation":{rotation}}}}}'.encode(),
+            f'{{"timestamp":{stamp},"parent_frame_id":{_WORLD_JSON},"child_frame_id":'
+            f'{_VEHICLE_JSON},"translation":{position},"rotation":{rotation}}}'.encode())
+
+
+_WORLD_JSON = json.dumps(WORLD_FRAME)
+_VEHICLE_JSON = json.dumps(VEHICLE_FRAME)
 
 
 _IDENTITY_POSE = {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
@@ -435,6 +469,10 @@ class ViewerConverter:
         """:meth:`convert` as JSON bytes, what the recorder writes: the same documents,
         with votes, point clouds and maps encoded the fast way (``*_json``)."""
         kind = type(body)
+        if kind is PoseTransformIDL:
+            in_frame, transform = pose_json(body)  # type: ignore[arg-type]
+            return [(viewer_topic(event_type), "foxglove.PoseInFrame", in_frame),
+                    (TF_TOPIC, "foxglove.FrameTransform", transform)]
         if type(body) is ArcVoteIDL:
             if not self._due(event_type, origin, body):
                 return []

@@ -184,8 +184,12 @@ class McapWriter:
         self._chunk_of[channel_id] = chunk
         return channel_id
 
-    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
+    def add_message(self, channel_id: int, log_time: int,
+                    data: bytes | bytearray | list[bytes | memoryview], publish_time: int,
                     sequence: int = 0) -> None:
+        """One message; ``data`` is its bytes, or a list of byte strings (bytes,
+        memoryviews of bytes) that make them one after the other, copied once, into the
+        chunk (:meth:`afa.events.Event.encode_parts`)."""
         chunk = self._chunk_of[channel_id]
         records = chunk.records
         if chunk.messages == 0:
@@ -199,9 +203,18 @@ class McapWriter:
             index = chunk.index[channel_id] = array("Q")
         index.append(log_time)
         index.append(len(records))
-        records += _MESSAGE.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id,
-                                 sequence, log_time, publish_time)
-        records += data
+        if isinstance(data, list):
+            size = 0
+            for part in data:
+                size += len(part)  # bytes, or a memoryview cast to bytes ("B")
+            records += _MESSAGE.pack(_OP_MESSAGE, _MESSAGE_FIXED + size, channel_id,
+                                     sequence, log_time, publish_time)
+            for part in data:
+                records += part
+        else:
+            records += _MESSAGE.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id,
+                                     sequence, log_time, publish_time)
+            records += data
         chunk.messages += 1
         self._counts[channel_id] += 1
         if len(records) > self._chunk_size:

@@ -155,6 +155,49 @@ async def test_patterns_choose_events_and_what_the_buffer_drops_is_counted_in_th
     assert dropped[-1].events == 90 and dropped[-1].by_type == {"Fix": 45}
 
 
+class Ticker(SubscribePublishServer):
+    """A fix every 10 ms of clock time."""
+
+    def __init__(self, name):
+        super().__init__(name)
+        self.out = self.publishes("Fix", GpsIDL)
+
+    async def run(self):
+        k = 0
+        async for _ in self.clock.periodic(0.01):
+            self.out.publish(GpsIDL(time=TimeIDL(sec=k)))
+            k += 1
+
+
+async def test_events_are_recorded_in_batches_and_none_is_lost_at_a_flush_or_the_end(
+        tmp_path):
+    """The recorder lets events wait up to its batch period: a flush records what waits
+    before writing (what was published before it is on disk after it), and finish()
+    records what still waits, so every published event is in the file."""
+    clock = VirtualClock(start=0.0)
+    system = System([Ticker("ticker")], clock=clock)
+    on_disk = []
+    recorder = Recorder(tmp_path / "batches.mcap", batch_period=0.25,
+                        on_flush=on_disk.append).attach(system)
+    async with system:
+        await clock.advance(1.13)
+        waiting = recorder._observer.subscription.statistics().queued
+        published = system.channel.counts()["Fix"]
+        assert 0 < waiting < published  # batches: some recorded, the latest waiting
+        assert recorder.events_written == published - waiting
+        recorder.flush()
+        assert recorder.events_written == recorder.events_flushed == published
+        await clock.advance(0.3)
+        published = system.channel.counts()["Fix"]
+        recorder.finish()  # not close(): nothing awaited
+    with LogReader(tmp_path / "batches.mcap") as reader:
+        fixes = [reader.decode_event(m).body.time.sec for m in reader.messages()
+                 if m.channel.kind == fmt.EVENT]
+        assert json.loads(reader.metadata["afa.end"]["events_dropped"]) == 0
+    assert fixes == list(range(published))
+    assert on_disk and on_disk[-1] <= published
+
+
 CHILD = textwrap.dedent("""
     import asyncio, sys
     from afa import SubscribePublishServer, System, VirtualClock

@@ -270,3 +270,48 @@ def test_what_the_recorder_writes_is_the_converted_document_byte_for_byte():
     assert converter.encode("Laser11", "laser", bodies[0][2])
     static = Range3dLaserIDL(time=stamp, sensorId=11, frame="L:F", points=beams, valid=valid)
     assert converter.encode("Laser11Array", "laser", static) == []
+
+
+def _rotation_of(q):
+    """The rotation matrix of a unit quaternion (the textbook formula)."""
+    x, y, z, w = q["x"], q["y"], q["z"], q["w"]
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def _random_rotation(rng):
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q @ np.diag(np.sign(np.diag(r)))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def test_poses_are_written_byte_for_byte_as_converted_and_their_quaternions_turn_back():
+    """``encode`` writes a pose's two documents as text: the bytes must be exactly
+    ``json.dumps`` of what ``convert`` builds, for rotations through each branch of the
+    quaternion's formula (trace positive, and each diagonal element largest), and the
+    quaternion must give the rotation back."""
+    rng = np.random.default_rng(11)
+    rotations = [_random_rotation(rng) for _ in range(40)]
+    rotations += [np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]),
+                  np.diag([-1.0, -1.0, 1.0]), np.eye(3)]
+    branches = set()
+    for k, rotation in enumerate(rotations):
+        transform = np.eye(4)
+        transform[:3, :3] = rotation
+        transform[:3, 3] = rng.normal(size=3) * 10.0 ** rng.integers(-6, 7)
+        pose = PoseTransformIDL(time=TimeIDL(sec=1126958401 + k, usec=k * 977),
+                                HTransform=transform, initialUTM=np.zeros(3))
+        converted = ViewerConverter().convert("Pose", "ms", pose)
+        encoded = ViewerConverter().encode("Pose", "ms", pose)
+        assert [(t, s) for t, s, _ in converted] == [(t, s) for t, s, _ in encoded]
+        for (_, schema, message), (_, _, data) in zip(converted, encoded, strict=True):
+            assert data == json.dumps(message, separators=(",", ":"), allow_nan=False).encode()
+            conforms(json.loads(data), SCHEMAS[schema])
+        q = quaternion(rotation)
+        assert q["w"] >= 0
+        assert np.allclose(_rotation_of(q), rotation, atol=1e-12)
+        diagonal = np.diag(rotation)
+        branches.add("trace" if diagonal.sum() > 0 else int(np.argmax(diagonal)))
+    assert branches == {"trace", 0, 1, 2}

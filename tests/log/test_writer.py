@@ -6,6 +6,7 @@ import struct
 import zlib
 
 import lz4.frame
+import numpy as np
 import pytest
 import zstandard
 from mcap.reader import NonSeekingReader, SeekingReader
@@ -38,7 +39,13 @@ def write_sample(compression: str, chunk_size: int = 600, threaded: bool = False
         t = 1_000_000_000 * 1126958400 + k * 10_000_000 - (5_000_000 if k % 7 == 3 else 0)
         data = bytes([k % 251]) * (k * 13 % 97)
         channel, topic = (a, "/Raptor/A") if k % 3 else (b, "/viz/B")
-        writer.add_message(channel, t, data, t, k)
+        if k % 5 == 1:  # as parts (Event.encode_parts): bytes, an array's memoryview, b""
+            cut = len(data) // 3
+            values = np.frombuffer(data[cut:], np.uint8).reshape(-1, 1)
+            writer.add_message(channel, t, [data[:cut], memoryview(b""),
+                                            memoryview(values).cast("B")], t, k)
+        else:
+            writer.add_message(channel, t, data, t, k)
         sent.append((topic, t, data, k))
         if k == 20:
             c = writer.register_channel("/afa/statistics", "json", 0, {})
