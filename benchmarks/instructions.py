@@ -21,7 +21,7 @@ measured seconds), as JSON with ``--json``.
 ``--record`` attaches the recorder (``afa run --record``: every event, poll and viewer
 channel, zstd in its worker thread, whose instructions count too) before the start, so
 the difference of two runs is the recording's cost in instructions, whatever the load
-(decision 0032).
+(decision 0034).
 
 Usage::
 

@@ -62,7 +62,7 @@ log = logging.getLogger("afa.log")
 #: chunks of their own that a replay or a seek skips without decompressing.
 VIEWER_GROUP = 1
 #: How long (s of clock time) the recorder lets events queue before recording them in
-#: one step (decision 0032): a step of the observer's task per event cost about as much
+#: one step (decision 0034): a step of the observer's task per event cost about as much
 #: as recording a small event, and a batch keeps the recorder's code and data in the
 #: processor's caches. About 50 events; in a real-time run a pause of a few milliseconds
 #: four times a second.
@@ -235,7 +235,7 @@ class Recorder:
     async def _on_batch(self, event: Event) -> None:
         """The observer's callback: records ``event`` and everything queued behind it,
         then lets ``batch_period`` of clock time pass, so that one step of the observer's
-        task records a batch of events (decision 0032: a task step per event cost more
+        task records a batch of events (decision 0034: a task step per event cost more
         than most events' recording)."""
         self._on_event(event)
         self._drain_queue()
