@@ -77,6 +77,9 @@ class CostGrid:
         self.initial_utm = np.array(plan.initialUTM)
         self.revision = plan.revision
         self.inflation, self.margin, self.margin_cost = inflation, margin, margin_cost
+        self.unknown = np.isnan(plan.hazard)
+        self.a_priori = np.asarray(plan.aPrioriCost, dtype=np.float64).copy()
+        self.prior = 1.0  # what an unknown cell is assumed to cost at least
         self.raw = plan.planning_cost().astype(np.float64)
         b = self.boundary = plan.planningBoundary
         self.inside = np.zeros(self.raw.shape, dtype=bool)
@@ -103,7 +106,12 @@ class CostGrid:
         i0 = int(round((window.originX - self.origin[0]) / g))
         j0 = int(round((window.originY - self.origin[1]) / g))
         rows, cols = window.rows, window.cols
-        self.raw[i0:i0 + rows, j0:j0 + cols] = window.planning_cost()
+        area = (slice(i0, i0 + rows), slice(j0, j0 + cols))
+        self.unknown[area] = np.isnan(window.hazard)
+        self.a_priori[area] = window.aPrioriCost
+        self.raw[area] = np.where(self.unknown[area],
+                                  np.maximum(self.a_priori[area], self.prior),
+                                  window.planning_cost())
         self.blocked[i0:i0 + rows, j0:j0 + cols] = \
             ~np.isfinite(self.raw[i0:i0 + rows, j0:j0 + cols]) | \
             ~self.inside[i0:i0 + rows, j0:j0 + cols]
@@ -123,6 +131,23 @@ class CostGrid:
         new = grown[xs, ys]
         self.cost[a0:a1, b0:b1] = grown
         return xs + a0, ys + b0, new
+
+    def update_prior(self, change: float = 0.1) -> bool:
+        """Assume unknown cells cost what the median known passable cell costs (at least
+        1, at least their a priori cost): on a hillside every unseen cell will be slope
+        too, and a plan through the unseen ground at cost 1 is a detour. Applied (and
+        True returned: the costs of every unknown cell changed, plan afresh) when the
+        median moved by more than ``change`` of itself."""
+        known = ~self.unknown & self.inside & np.isfinite(self.raw)
+        if not known.any():
+            return False
+        prior = max(1.0, float(np.median(self.raw[known])))
+        if abs(prior - self.prior) <= change * self.prior:
+            return False
+        self.prior = prior
+        self.raw = np.where(self.unknown, np.maximum(self.a_priori, prior), self.raw)
+        self.cost = self._grow(self.raw, self.blocked)
+        return True
 
     def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
         i = int(math.floor((x - self.origin[0]) / self.gridsize))
@@ -175,6 +200,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.plan_times: list[float] = []
         self.refine_times: list[float] = []
         self.counters = {"cycles": 0, "plans": 0, "replans": 0, "tracking_replans": 0,
+                         "prior_changes": 0,
                          "no_path": 0, "cells_updated": 0, "poll_errors": 0,
                          "refined": 0, "undrivable": 0}
 
@@ -271,6 +297,10 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             self.planner = None  # another map or other limits: plan afresh
             return self.grid
         xs, ys, new = self.grid.apply(window)
+        if self.grid.update_prior():
+            self.counters["prior_changes"] += 1
+            self.planner = None  # every unknown cell's cost changed: plan afresh
+            return self.grid
         if self.planner is not None and len(xs):
             self.counters["cells_updated"] += self.planner.update_costs(xs, ys, new)
         return self.grid

@@ -465,6 +465,8 @@ DEVIATIONS = {
     ("ObstacleDetection", "VehicleWidth"): "1.4",
     # Tables A.3 and A.4 put the IMU (38400 baud) and the GPS (57600) on one port
     ("GpsSokkiaConfig", "Device"): "/dev/ttyUSB1",
+    # Pure Pursuit's map-blind pull outvoted FindPath's detours (decision 0035)
+    ("ArcArbiter", "PursuitWeight"): "0.25",
 }
 
 

@@ -149,7 +149,7 @@ def _shared_instants(reader) -> int:
 async def test_a_changed_arbiter_weight_diverges_on_the_decision(recorded_autonomous,
                                                                  variant):
     report = await check(recorded_autonomous, variant(
-        "weight", '"PursuitWeight" value="1"', '"PursuitWeight" value="2"'))
+        "weight", '"PursuitWeight" value="0.25"', '"PursuitWeight" value="2"'))
     d = report.divergence
     assert d is not None and d.topic == "/Raptor/ArcDecision" and d.origin == "arcArbiter"
     assert d.field.startswith("scores[") and d.recorded != d.replayed
