@@ -9,7 +9,9 @@ runs one cycle every ``PlanEventInterval`` seconds:
 2. the planning map in bulk (decision 0009): the whole map once (``getPlanMap``), then
    only the window changed since the revision it holds (``getPlanMapChanges``);
 3. its own cost grid: the map's planning cost (sensed where sensed, else a priori;
-   unknown cells cost ``UnknownCellCost``, the free-space assumption), with impassable
+   unknown cells cost ``UnknownCellCost``, the free-space assumption, but no less than
+   the median known passable cell: on a hillside the unseen ground is slope too,
+   decision 0035, :meth:`CostGrid.update_prior`), with impassable
    cells grown by the vehicle's half width (``InflationRadius``) and a soft margin around
    them (``MarginRadius`` at ``MarginCost``), so a path for the rear axle keeps the body
    clear; cells outside the planning boundary are impassable;
