@@ -209,6 +209,16 @@ def homogeneous_transform(east: float, north: float, up: float, yaw: float,
     ])
 
 
+def turned_lever(offset: Sequence[float], yaw: float, pitch: float,
+                 roll: float) -> FloatArray:
+    """A body-frame lever arm (the GPS antenna's offset from the vehicle reference)
+    turned by Rz(yaw) Ry(pitch) Rx(roll): on a 13° slope an antenna 1.75 m up leans
+    0.39 m downhill of the axle."""
+    rotation = homogeneous_transform(0.0, 0.0, 0.0, yaw, pitch, roll)[:3, :3]
+    lever: FloatArray = rotation @ np.asarray(offset, dtype=np.float64)
+    return lever
+
+
 def chi2_quantile(probability: float, dof: int) -> float:
     """Chi-square quantile for 1 or 2 degrees of freedom (the gates this filter uses).
 
@@ -787,7 +797,6 @@ class PoseFilter:
         self.predict(t)
         variance = std_m * std_m
         ax, ay, _ = self._levelled_lever()
-        lever = math.hypot(ax, ay)
 
         if self._origin is None:
             # First fix: the reference is within one lever arm of the antenna.
@@ -796,10 +805,11 @@ class PoseFilter:
             known = self._heading_known
             e_ref = east - (ce * ax - se * ay if known else 0.0)
             n_ref = north - (se * ax + ce * ay if known else 0.0)
+            lever = math.hypot(ax, ay)
             self._set_position(e_ref, n_ref, variance + (0.0 if known else lever * lever))
             accepted = True
         else:
-            accepted = self._gps_position_update(t, east, north, variance, lever)
+            accepted = self._gps_position_update(t, east, north, variance, ax, ay)
         if not accepted:
             return False
         if elevation is not None:
@@ -820,10 +830,12 @@ class PoseFilter:
         return True
 
     def _gps_position_update(self, t: float, east: float, north: float, variance: float,
-                             lever: float) -> bool:
+                             ax: float, ay: float) -> bool:
+        """The fix of the antenna at (ax, ay) from the reference, levelled (heading
+        not yet applied)."""
         tu = self.tuning
         assert self._origin is not None
-        ax, ay, _ = self._levelled_lever()
+        lever = math.hypot(ax, ay)
         yaw = float(self._x[IX_YAW])
         c, s = math.cos(yaw), math.sin(yaw)
         hm = np.zeros((2, STATE_SIZE))
@@ -859,11 +871,9 @@ class PoseFilter:
         return False
 
     def _levelled_lever(self) -> tuple[float, float, float]:
-        """The antenna lever arm turned by the IMU's pitch and roll (the heading is the
-        state's, turned in the measurement model): on a 13° slope the antenna 1.75 m up
-        leans 0.39 m downhill of the axle, which a level lever arm put into the pose."""
-        rotation = homogeneous_transform(0.0, 0.0, 0.0, 0.0, self._pitch, self._roll)[:3, :3]
-        x, y, z = rotation @ np.asarray(self.tuning.antenna_offset, dtype=np.float64)
+        """The antenna lever arm turned by the IMU's pitch and roll (:func:`turned_lever`;
+        the heading is the state's, turned in the measurement model)."""
+        x, y, z = turned_lever(self.tuning.antenna_offset, 0.0, self._pitch, self._roll)
         return float(x), float(y), float(z)
 
     def _antenna_velocity(self) -> tuple[float, float]:
@@ -1165,12 +1175,9 @@ class RawPose:
 
     def _lever(self) -> FloatArray:
         """The antenna's offset from the vehicle reference in the world frame: the body
-        offset turned by heading, pitch and roll (on a 13° slope the antenna 1.75 m up
-        leans 0.39 m downhill of the axle)."""
-        rotation = homogeneous_transform(0.0, 0.0, 0.0, self.heading or 0.0, self._pitch,
-                                         self._roll)[:3, :3]
-        lever: FloatArray = rotation @ np.asarray(self.antenna_offset, dtype=np.float64)
-        return lever
+        offset turned by heading, pitch and roll (:func:`turned_lever`)."""
+        return turned_lever(self.antenna_offset, self.heading or 0.0, self._pitch,
+                            self._roll)
 
     @property
     def east(self) -> float:
