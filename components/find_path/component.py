@@ -111,12 +111,9 @@ class CostGrid:
         area = (slice(i0, i0 + rows), slice(j0, j0 + cols))
         self.unknown[area] = np.isnan(window.hazard)
         self.a_priori[area] = window.aPrioriCost
-        self.raw[area] = np.where(self.unknown[area],
-                                  np.maximum(self.a_priori[area], self.prior),
+        self.raw[area] = np.where(self.unknown[area], self._assumed(area),
                                   window.planning_cost())
-        self.blocked[i0:i0 + rows, j0:j0 + cols] = \
-            ~np.isfinite(self.raw[i0:i0 + rows, j0:j0 + cols]) | \
-            ~self.inside[i0:i0 + rows, j0:j0 + cols]
+        self.blocked[area] = ~np.isfinite(self.raw[area]) | ~self.inside[area]
         self.revision = window.revision
         self.initial_utm = np.array(window.initialUTM)
         # the grown cost of a cell depends on raw cells up to `margin` away
@@ -147,9 +144,15 @@ class CostGrid:
         if abs(prior - self.prior) <= change * self.prior:
             return False
         self.prior = prior
-        self.raw = np.where(self.unknown, np.maximum(self.a_priori, prior), self.raw)
+        self.raw = np.where(self.unknown, self._assumed(), self.raw)
         self.cost = self._grow(self.raw, self.blocked)
         return True
+
+    def _assumed(self, area: Any = ...) -> np.ndarray:
+        """What the unknown cells of ``area`` are assumed to cost: their a priori cost,
+        at least the prior."""
+        assumed: np.ndarray = np.maximum(self.a_priori[area], self.prior)
+        return assumed
 
     def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
         i = int(math.floor((x - self.origin[0]) / self.gridsize))

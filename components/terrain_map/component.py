@@ -131,7 +131,7 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
         self.ego = EgoView.ahead(p.EgoDepth / 1000.0, p.EgoWidth / 1000.0, g)
         self.poses = PoseBuffer(POSE_BUFFER, PoseAudit.from_parameters(p))
         self.stabiliser = PoseStabiliser()
-        self.stable = np.eye(4)  # the latest pose with the stabilised height
+        self.stable = np.eye(4)  # the latest pose, placed by the stabiliser
         self.stereo = StereoBalance(p.StereoPeriod)
         self.frames: dict[str, np.ndarray | None] = {}
         self.initial_utm: np.ndarray | None = None
