@@ -126,10 +126,6 @@ class PoseStabiliser:
         #: poses placed with odometry, and without (no odometry for them)
         self.counts = {"odometry": 0, "no_odometry": 0}
 
-    @property
-    def height(self) -> float:
-        return float(self.position[2])
-
     def reset(self) -> None:
         self._last = None
         self.odometry.clear()
