@@ -249,6 +249,13 @@ def _config_check(args: argparse.Namespace) -> int:
                         "cannot serve both; give each device its own port")
     for line in warnings:
         print(line, file=sys.stderr)
+    broken = system.file_problems()
+    for name, problem in broken.items():
+        print(f"{args.config}:{lines.get(name, 0)}: {name}: {problem}", file=sys.stderr)
+    if broken:
+        print(f"{args.config}: invalid: {len(broken)} component(s) cannot read their files",
+              file=sys.stderr)
+        return EXIT_INVALID
     count = sum(len(sets) for sets in config.sections.values())
     print(f"{args.config}: valid ({len(config.sections)} sections, {count} parameter sets, "
           f"robot {config.robot!r}, {len(config.launcher.Components)} launcher entries"

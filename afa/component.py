@@ -264,6 +264,11 @@ class Component(Generic[P]):
     async def teardown(self) -> None:
         """Release resources acquired in setup. Called at every stop or failure."""
 
+    def check_files(self, base_dir: Path) -> None:
+        """Read the files ``setup`` would read (relative names resolved against
+        ``base_dir``, the configuration's folder) and raise what is wrong with them,
+        without starting anything: ``afa config check`` calls it. The default reads none."""
+
     def statistics(self) -> dict[str, Any]:
         """Counters for health displays and run summaries; extend in subclasses."""
         return {port.name: port.statistics() for port in self._inputs}

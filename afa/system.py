@@ -38,7 +38,7 @@ from typing import Any, Protocol, TypeVar
 
 from afa.clock import Clock, VirtualClock, WallClock
 from afa.component import Component, Context, Health, PublishServerReactor, RestartPolicy, State
-from afa.errors import ComponentError, StartupError, TaskFailed
+from afa.errors import AfaError, ComponentError, StartupError, TaskFailed
 from afa.events import Event, EventChannel, Overflow, Subscription
 from afa.meter import LoopMeter
 from afa.naming import NameRegistry, join_name
@@ -276,6 +276,17 @@ class System:
                 if isinstance(spec, SerialSpec):
                     ports.setdefault(spec.device, []).append((component.name, spec.baudrate))
         return ports
+
+    def file_problems(self) -> dict[str, str]:
+        """``{component: what is wrong}`` for the files components would read at setup
+        (a geometry model, ...), read now without starting (``afa config check``)."""
+        problems: dict[str, str] = {}
+        for component in self.components.values():
+            try:
+                component.check_files(self.base_dir)
+            except (AfaError, OSError, ValueError) as exc:
+                problems[component.name] = str(exc)
+        return problems
 
     def port_conflicts(self) -> dict[str, list[tuple[str, int]]]:
         """The serial ports that components name at different baud rates: at most one of

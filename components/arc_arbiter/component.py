@@ -65,7 +65,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
     def __init__(self, name: str, parameters: ArcArbiterParameters | None = None) -> None:
         super().__init__(name, parameters)
         p = self.parameters
-        self.subscribes(p.VoteEventName, ArcVoteIDL, self._on_vote, maxsize=64)
+        self.subscribes(p.VoteEventName, ArcVoteIDL, self._on_vote, maxsize=64, required=True)
         self.decisions = self.publishes(p.DecisionEventName, ArcDecisionIDL)
         if p.RecoverAfter > 0:
             self.subscribes(p.TraverseEventName, TravMapArrayEventIDL, self._on_map, maxsize=2)
@@ -197,6 +197,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         decision = self._back_out(self.book.decide(now), now)
         self.decision = decision
         self.counters["decisions"] += 1
+        self._note_inputs(decision)
         key = (decision.index, decision.speed, decision.steering)
         if key != self._sent or now - self._sent_at >= COMMAND_REFRESH - TIME_TOLERANCE:
             if decision.failsafe is not None and (self._sent is None or self._sent[1] != 0):
@@ -207,6 +208,23 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         if shown != self._published or now - self._published_at >= COMMAND_REFRESH - TIME_TOLERANCE:
             self._published, self._published_at = shown, now
             self._publish(decision)
+
+    def _note_inputs(self, decision: ArbiterDecision) -> None:
+        """Unhealthy while the vehicle is stopped for want of votes (every behaviour
+        silent or stale, or a required one); a stop the votes decide (every arc vetoed,
+        the mission finished) is the arbiter working. A failed command says more and
+        stays until a command goes through."""
+        if self._health_detail.startswith("setVelocity"):
+            return
+        if decision.failsafe == "no-fresh-vote" and self.counters["votes"]:  # (before
+            # the first vote the required input says "waiting for")
+            self.set_health(False, "stopped: no behaviour has a fresh vote")
+        elif decision.failsafe == "missing-required":
+            missing = sorted(self.book.required - set(decision.fresh))
+            self.set_health(False, "stopped: no fresh vote from required "
+                                   f"{', '.join(missing) or 'behaviours'}")
+        elif self._health_detail.startswith("stopped:"):
+            self.set_health(True, "commanding")
 
     def _dispatch(self, decision: ArbiterDecision) -> None:
         """Hand ``decision`` to the sender; a stop while the sender waits goes at once."""

@@ -61,6 +61,9 @@ __all__ = ["FindPath", "BEHAVIOUR", "CostGrid"]
 BEHAVIOUR = "FindPath"
 #: How far along a drivable (refined) path the vote aims (m): two of its motions.
 REFINED_LOOKAHEAD = 1.5
+#: Planning cycles in a row without a path after which FindPath reports itself unhealthy
+#: (a single cycle without one is common while a map update closes and reopens a gap).
+NO_PATH_UNHEALTHY = 5
 
 
 class CostGrid:
@@ -207,7 +210,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.counters = {"cycles": 0, "plans": 0, "replans": 0, "tracking_replans": 0,
                          "prior_changes": 0,
                          "no_path": 0, "cells_updated": 0, "poll_errors": 0,
-                         "refined": 0, "undrivable": 0}
+                         "refined": 0, "undrivable": 0, "invalid_poses": 0}
+        self._no_path_streak = 0  # planning cycles in a row that found no path
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
@@ -216,6 +220,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.grid = self.planner = None
         self.goal = None
         self.path = []
+        self._no_path_streak = 0
 
     async def run(self) -> None:
         p = self.parameters
@@ -228,13 +233,17 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             except AfaError as exc:  # a server restarting: the next cycle tries again
                 self.counters["poll_errors"] += 1
                 self.log.info("%s: planning cycle skipped: %s", self.name, exc)
+                self.set_health(False, f"planning cycle skipped: {exc}")
 
     async def _cycle(self) -> None:
         self.counters["cycles"] += 1
         waypoint = await self.global_map.getCurrentWaypoint()
         if waypoint is None:
+            self.set_health(True, "no mission")
             return  # no mission, or finished: FindPath has no opinion
         pose = await self.platform.getPose()
+        if not pose.poseValidFlag:
+            self.counters["invalid_poses"] += 1  # still the best estimate: plan from it
         grid = await self._map()
         x, y = float(pose.HTransform[0, 3]), float(pose.HTransform[1, 3])
         yaw = math.atan2(float(pose.HTransform[1, 0]), float(pose.HTransform[0, 0]))
@@ -283,6 +292,14 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.paths.publish(PlannedPathIDL(time=stamp, points=centres.reshape(-1, 2),
                                           initialUTM=grid.initial_utm,
                                           cost=self.planner.cost_to_goal(), goal=waypoint))
+        self._no_path_streak = 0
+        if not pose.poseValidFlag:
+            self.set_health(False, "planning from a pose marked invalid (poseValidFlag "
+                                   "false)")
+        elif undrivable:
+            self.set_health(True, "no drivable way onto the plan from here: backing out")
+        else:
+            self.set_health(True, "planning")
 
     async def _map(self) -> CostGrid:
         p = self.parameters
@@ -389,6 +406,10 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
     def _no_path(self, grid: CostGrid, waypoint: WaypointIDL) -> None:
         """Veto every arc, and publish the empty path (displays drop the old one)."""
         self.counters["no_path"] += 1
+        self._no_path_streak += 1
+        if self._no_path_streak >= NO_PATH_UNHEALTHY:
+            self.set_health(False, f"no path to the waypoint for {self._no_path_streak} "
+                                   "cycles: every arc vetoed")
         self.path = []
         stamp = TimeIDL.from_seconds(self.clock.now())
         self.votes.publish(ArcVotes.halt(len(self.arcs)).to_idl(

@@ -89,17 +89,7 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
     # -- lifecycle ---------------------------------------------------------------------
     async def setup(self) -> None:
         p = self.parameters
-        path = Path(p.ModelFileName)
-        if not path.is_absolute():
-            path = self.context.base_dir / path
-            default = ModelServerParameters.model_fields["ModelFileName"].default
-            if not path.exists() and p.ModelFileName == default and SHIPPED_MODEL.exists():
-                # the default names the Raptor's geometry, which afa ships (a file from
-                # `afa config defaults` need not sit beside a copy of it)
-                self.log.info("no %s beside the configuration: using the shipped %s",
-                              p.ModelFileName, SHIPPED_MODEL)
-                path = SHIPPED_MODEL
-        self.model = GeometryModel.load(path)
+        self.model = GeometryModel.load(self.model_path(self.context.base_dir))
         antenna = self.model.transformation(VEHICLE_FRAME, ANTENNA_FRAME)[:3, 3]
         self._imu_rotation = self.model.transformation(VEHICLE_FRAME, IMU_FRAME)[:3, :3]
         offset = (float(antenna[0]), float(antenna[1]), float(antenna[2]))
@@ -111,6 +101,25 @@ class ModelServer(SubscribePublishServer[ModelServerParameters]):
                 fidget_delay=p.FidgetDelay, fidget_period=p.FidgetPeriod,
                 antenna_offset=offset))
         self.latest = self.slot("pose")
+
+    def model_path(self, base_dir: Path) -> Path:
+        """The geometry assembly file: ``ModelFileName``, relative to ``base_dir``."""
+        name = self.parameters.ModelFileName
+        path = Path(name)
+        if path.is_absolute():
+            return path
+        path = base_dir / path
+        default = ModelServerParameters.model_fields["ModelFileName"].default
+        if not path.exists() and name == default and SHIPPED_MODEL.exists():
+            # the default names the Raptor's geometry, which afa ships (a file from
+            # `afa config defaults` need not sit beside a copy of it)
+            self.log.info("no %s beside the configuration: using the shipped %s",
+                          name, SHIPPED_MODEL)
+            return SHIPPED_MODEL
+        return path
+
+    def check_files(self, base_dir: Path) -> None:
+        GeometryModel.load(self.model_path(base_dir))
 
     async def run(self) -> None:
         period = self.parameters.UpdatePeriod

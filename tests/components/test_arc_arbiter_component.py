@@ -163,6 +163,26 @@ async def test_when_every_vote_goes_stale_a_stop_is_on_the_wire_within_100_ms(ph
         assert final.failsafe == "no-fresh-vote" and final.stale == ("PurePursuit",)
 
 
+async def test_health_shows_a_stop_for_want_of_votes_and_recovers_with_a_fresh_one():
+    """Not "ok" while the vehicle stands because no behaviour votes (a stack without
+    inputs); a vetoed stop is the arbiter working, and healthy."""
+    stale_after = ArcArbiterParameters().stale_vote_time
+    async with rig(cruise=False) as r:
+        await r.until(1.0)
+        health = r.arbiter.health()
+        assert not health.healthy and health.detail == "waiting for ArcVote"
+        r.publish(vote("PurePursuit", speed=0.5))
+        await r.until(1.05)
+        assert r.arbiter.health().healthy
+        r.publish(vote("ObstacleAvoidance", veto=True, votes=0.0))
+        await r.until(1.1)
+        assert r.decisions_seen()[-1].body.failsafe == "all-vetoed"
+        assert r.arbiter.health().healthy
+        await r.until(1.0 + stale_after + 0.2)
+        health = r.arbiter.health()
+        assert not health.healthy and "no behaviour has a fresh vote" in health.detail
+
+
 async def test_every_arc_vetoed_stops_at_once_and_a_silent_vetoer_loses_its_veto():
     stale_after = ArcArbiterParameters().stale_vote_time
     async with rig() as r:

@@ -206,6 +206,26 @@ async def test_with_no_path_it_vetoes_every_arc_and_shows_no_path():
     assert all(e.body.goal == goal and math.isinf(e.body.cost) for e in paths)
 
 
+async def test_health_says_planning_and_turns_unhealthy_when_no_path_persists():
+    """An operator sees FindPath planning, and sees it unhealthy (not "ok") once no path
+    has been found for NO_PATH_UNHEALTHY cycles in a row."""
+    from components.find_path.component import NO_PATH_UNHEALTHY
+    wall: Box = (8.0, 9.0, -6.0, 6.0)
+    async with rig(waypoint(16.0, 0.0), [wall]) as r:
+        await r.until(2.5)
+        health = r.planner.health()
+        assert health.healthy and health.detail == "planning"
+    pen = [(13.0, 19.0, -3.0, -2.5), (13.0, 19.0, 2.5, 3.0), (13.0, 13.5, -3.0, 3.0),
+           (18.5, 19.0, -3.0, 3.0)]
+    async with rig(waypoint(16.0, 0.0), pen) as r:
+        await r.until(NO_PATH_UNHEALTHY - 0.5)  # cycles at 1, 2, ...: one short
+        assert r.planner.health().healthy
+        await r.until(NO_PATH_UNHEALTHY + 0.5)
+        health = r.planner.health()
+        assert not health.healthy
+        assert f"no path to the waypoint for {NO_PATH_UNHEALTHY} cycles" in health.detail
+
+
 # --------------------------------------------------------------------------- replanning
 
 async def test_sensed_changes_repair_the_plan_incrementally_from_bulk_map_reads():

@@ -262,6 +262,26 @@ def test_check_warns_when_two_devices_share_a_port_at_different_rates(tmp_path, 
     assert "/dev/ttyS0" not in err
 
 
+def test_check_reads_the_geometry_model_and_names_its_broken_line(tmp_path, capsys):
+    """`config check` opens the files components read at setup: a geometry body file
+    with a bad element fails the check with that file and line, not only at `run`."""
+    import shutil
+    shutil.copy(ROOT / "configs" / "050917raptor01.XML", tmp_path)
+    shutil.copytree(ROOT / "configs" / "bodies", tmp_path / "bodies")
+    path, _ = mutate(tmp_path, "<!--", "<!--")  # the shipped file, beside its copies
+    code, out, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 0 and "valid" in out, err
+    body = tmp_path / "bodies" / "digiclops.xml"
+    lines = body.read_text().splitlines()
+    line = next(i for i, text in enumerate(lines, 1) if "<frame " in text)
+    lines[line - 1] = lines[line - 1].replace("<frame ", '<frame colour="red" ', 1)
+    body.write_text("\n".join(lines) + "\n")
+    code, out, err = run_cli(capsys, "config", "check", str(path))
+    assert code == 2 and "valid (" not in out
+    assert f"{body}:{line}: <frame> has no attribute 'colour'" in err, err
+    assert "modelServer" in err and "cannot read their files" in err
+
+
 async def test_a_shared_serial_port_refuses_a_second_baud_rate():
     """At run time the second component on a port opened at another rate gets EDevIO
     (and stays unhealthy) instead of silently talking at the first one's rate."""
