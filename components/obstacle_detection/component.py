@@ -8,7 +8,11 @@ below ``SafetyDepth`` (:mod:`components.obstacle_detection.detect`) and publishe
 result as an ``ArcVote`` (behaviour ``ObstacleDetection``): a halt (every arc vetoed) at
 ``NumHitsTolerance`` hits, then nothing for ``ResetCounter`` scans, else a clear vote.
 The halt is published in the handler of the scan that showed the obstacle, so it reaches
-the arbiter, and through it the vehicle, within that scan period. Scans in a frame
+the arbiter, and through it the vehicle, within that scan period. A clear vote weighs
+nothing in the arbiter's sum: one goes out at once after a halt (it replaces the halt),
+and otherwise at most every ``CLEAR_REFRESH`` seconds, which keeps the catch's vote
+fresh and visible at a tenth of the scan rate's events (two lasers scan 75 times a
+second; each vote is an arbiter decision and a recorded event). Scans in a frame
 ModelServer does not know are ignored, and the component reports itself unhealthy.
 """
 
@@ -19,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from afa import EOutOfBounds, Event, SubscribePublishServer
+from afa.clock import TIME_TOLERANCE
 from afa.errors import AfaError
 from components.arcs import ARC_SET_SECTION, ArcSet, arc_set_of
 from components.obstacle_detection.detect import ObstacleDetector
@@ -29,6 +34,9 @@ __all__ = ["ObstacleDetection", "BEHAVIOUR", "VEHICLE_FRAME"]
 
 BEHAVIOUR = "ObstacleDetection"
 VEHICLE_FRAME = "Raptor:RearAxleCenter"
+#: A clear vote goes out at most this often (s), Pure Pursuit's rate; far inside
+#: ``StaleVoteTime`` (1.5 s). Halts, and the first clear vote after one, go out at once.
+CLEAR_REFRESH = 0.1
 
 
 class ObstacleDetection(SubscribePublishServer[ObstacleDetectionParameters]):
@@ -47,10 +55,12 @@ class ObstacleDetection(SubscribePublishServer[ObstacleDetectionParameters]):
         self.detector = ObstacleDetector(p, self.arcs)
         self._frames: dict[str, np.ndarray | None] = {}
         self.counters = {"scans": 0, "halts": 0, "unknown_frames": 0, "no_geometry": 0}
+        self._cleared_at: float | None = None  # when the last clear vote went out
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
         self.detector = ObstacleDetector(self.parameters, self.arcs)
+        self._cleared_at = None
 
     async def _on_scan(self, event: Event) -> None:
         scan: Range3dSeqEventIDL | Range3dLaserIDL = event.body  # type: ignore[assignment]
@@ -64,7 +74,14 @@ class ObstacleDetection(SubscribePublishServer[ObstacleDetectionParameters]):
         self.counters["scans"] += 1
         if result.votes is None:
             return
-        if result.halt:
+        now = self.clock.monotonic()
+        if not result.halt:
+            last = self._cleared_at
+            if last is not None and now - last < CLEAR_REFRESH - TIME_TOLERANCE:
+                return  # the clear vote out is fresh, and this one says the same
+            self._cleared_at = now
+        else:
+            self._cleared_at = None  # the next clear vote replaces the halt at once
             self.counters["halts"] += 1
             self.log.warning("%s: halt: %d returns above %.2f m or below %.2f m within "
                              "%.1f m ahead", self.name, result.hits.total if result.hits else 0,

@@ -229,6 +229,34 @@ async def test_a_halt_vetoes_every_arc_then_holds_for_reset_counter_scans_and_re
         assert od.statistics()["halts"] == 2
 
 
+async def test_clear_votes_go_out_at_pure_pursuits_rate_and_a_halt_at_once():
+    """A clear vote weighs nothing: one per CLEAR_REFRESH keeps it fresh (two lasers
+    scanning 75 times a second would otherwise make 75 arbiter decisions of nothing); a
+    halt is never held back, whatever went out just before it."""
+    from components.obstacle_detection.component import CLEAR_REFRESH
+    period = 0.0266
+    async with detection() as (system, clock, votes, od):
+        p = od.parameters
+        await clock.advance(1.0)
+        for _ in range(76):  # two seconds of both lasers
+            publish(system, scan_of(GROUND, laser_id=11), "Laser11")
+            publish(system, scan_of(GROUND, laser_id=12), "Laser12")
+            await clock.advance(period)
+        clears = _drain(votes)
+        times = [e.time for e in clears]
+        assert all(not e.body.veto.any() for e in clears)
+        assert len(clears) == pytest.approx(76 * period / CLEAR_REFRESH, abs=2)
+        assert min(np.diff(times)) >= CLEAR_REFRESH - 1e-9
+        assert max(np.diff(times)) <= CLEAR_REFRESH + period + 1e-9
+        while not (sent := _drain(votes)):  # up to the scan that sends a clear vote
+            publish(system, scan_of(GROUND))
+            await clock.advance(period)
+        publish(system, scan_of(np.concatenate([GROUND, returns(p.NumHitsTolerance)])))
+        await clock.advance(0.001)
+        (halt,) = _drain(votes)
+        assert halt.body.veto.all() and halt.time - sent[-1].time < CLEAR_REFRESH
+
+
 @pytest.mark.parametrize(("what", "points", "halts"), [
     ("a post ahead", returns(5), True),
     ("noise below NumHitsTolerance", returns(4), False),
