@@ -27,17 +27,22 @@ tests):
    *higher* side of a step between cells is marked (a rock's or a trunk's own cells, a
    ledge's or a ditch's lip); the *lower* side only when it lies a step below the
    surrounding ground (the median elevation of the known cells within ``2·r`` cells,
-   ``r`` as in 5): the foot of a ditch's wall, never the open ground in front of a rock
-   (marking both sides grew a 0.6 m trunk into a 2 m obstacle, which closed the gaps of
-   a forest; Obstacle Avoidance adds the vehicle's own radius). The *top* of a low,
+   ``r`` as in 5, each brought to the cell along the ground's *trend*: the mean
+   gradient of the planar cells, rule 3, within ``2·r`` cells, no steeper than the
+   slope limit; on a 14° slope the ground 2 m downhill lies 0.5 m lower, and is
+   neither a pit nor the foot of anything): the foot of a ditch's wall, never the open
+   ground in front of a rock (marking both sides grew a 0.6 m trunk into a 2 m
+   obstacle, which closed the gaps of a forest; Obstacle Avoidance adds the vehicle's
+   own radius). The *top* of a low,
    wide obstacle seen from one side has no lower neighbour in view (its near face is
    in the rim cells, its far side in shadow) and would read as a level plateau; a
    known cell is a step too when it lies within ``r`` cells of a step cell, is
    *bounded* (along some axis each side holds, within ``r`` cells, a cell a step lower
-   or an unknown cell: the ground beyond a ditch's lip runs on level towards the
-   vehicle and is not bounded), lies a step above the surrounding ground (the median
-   as above; its step is that height) and is joined to a step cell through such cells
-   (8-connected). A smooth hill's top has no step cell to join. With
+   than the trend explains, or an unknown cell: the ground beyond a ditch's lip runs on
+   level towards the vehicle and is not bounded; the ground facing down a slope, with
+   the map's edge behind it, is not bounded either), lies a step above the surrounding
+   ground (the median as above; its step is that height) and is joined to a step cell
+   through such cells (8-connected). A smooth hill's top has no step cell to join. With
    ``StepPercent`` 0 the hazard is binary, 1 when ``step >= T``; with ``StepPercent``
    1 it is graded, ``min(1, step / T)``: the step "as a percentage" of ``Stepheight``
    (which stays in millimetres).
@@ -152,6 +157,8 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+#: The ground's trend: its gradient (m/m) along x and y at every cell (:func:`_trend`).
+Trend = tuple[FloatArray, FloatArray]
 
 #: Flag bits in :attr:`TraversabilityLayers.flags`: which rule reached hazard 1.
 FLAG_STEP = 1
@@ -449,6 +456,8 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
         legal = np.where(steepness > tan_limit, tan_limit / steepness, 1.0)
         rise = np.nan_to_num(legal * (np.abs(gradient_x) * cells.span_x
                                       + np.abs(gradient_y) * cells.span_y))
+    # the ground's trend, taken out where a cell is compared with the ground around it
+    trend = _trend(gradient_x, gradient_y, tan_limit, 2 * reach)
 
     # --- step: only the higher side of a step is marked (see the module doc)
     around = _stacked(_padded(elev, 1, np.nan), 1, NEIGHBOURS, (rows, cols))
@@ -457,14 +466,15 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     upper = np.maximum(differences.max(axis=0), 0.0)  # a step above a neighbour
     lower = np.maximum(-differences.min(axis=0), 0.0)  # a step below a neighbour
     with np.errstate(invalid="ignore"):
-        in_pit = _below_surroundings(known & (lower >= threshold), elev, threshold, 2 * reach)
+        in_pit = _below_surroundings(known & (lower >= threshold), elev, threshold, 2 * reach,
+                                     trend, g)
     spread = np.maximum(high - low - rise, 0.0)  # what the ground's slope does not explain
     step = np.where(known, np.maximum(spread, np.where(in_pit, np.maximum(upper, lower),
                                                        upper)), np.nan)
     with np.errstate(invalid="ignore"):
         step_full = known & (step >= threshold)
     if reach >= 1:  # the top of a low, wide obstacle: no lower neighbour in view
-        top, above = _raised_tops(elev, known, step_full, threshold, reach)
+        top, above = _raised_tops(elev, known, step_full, threshold, reach, trend, g)
         step = np.where(top, np.maximum(step, above), step)
         step_full |= top
     if rules.step_percent:
@@ -479,8 +489,8 @@ def compute_hazards(cells: CoarseCells, rules: HazardRules, vehicle_xy: tuple[fl
     hole_goodness = np.zeros((rows, cols))
     if rules.step_on and reach >= 1:
         sunken, hole, hole_goodness = _negative_obstacles(
-            elev, low, goodness, known, step_full, slope, tan_limit, threshold, g, reach)
-        sunken |= _walled_pits(known, step_full | hole, elev, threshold, reach)
+            elev, low, goodness, known, step_full, slope, tan_limit, threshold, g, reach, trend)
+        sunken |= _walled_pits(known, step_full | hole, elev, threshold, reach, trend, g)
 
     hazard = np.zeros((rows, cols))
     if rules.step_on:
@@ -569,10 +579,11 @@ def _plane_slopes(elev: FloatArray, offset_x: FloatArray, offset_y: FloatArray, 
 def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
                         known: NDArray[np.bool_], stepped: NDArray[np.bool_],
                         slope: FloatArray, tan_limit: FloatArray, threshold: FloatArray,
-                        g: float, reach: int
+                        g: float, reach: int, ground: Trend
                         ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray]:
     """Sunken known cells, holes (unknown cells across a drop) and each hole's best
-    bounding goodness; see the module doc."""
+    bounding goodness; see the module doc. ``ground`` is the ground's trend
+    (:func:`_trend`), for the sunken cells' surroundings."""
     shape = elev.shape
     fitted = np.tan(np.radians(slope))
     padded = {
@@ -616,11 +627,13 @@ def _negative_obstacles(elev: FloatArray, low: FloatArray, goodness: FloatArray,
             drop = unknown & f1 & f2 & (np.fmax(bank1, bank2) - deepest >= threshold)
         hole |= drop
         np.maximum(hole_goodness, np.where(drop, best, 0.0), out=hole_goodness)
-    return _below_surroundings(sunken, elev, threshold, 2 * reach), hole, hole_goodness
+    return (_below_surroundings(sunken, elev, threshold, 2 * reach, ground, g), hole,
+            hole_goodness)
 
 
 def _walled_pits(candidates: NDArray[np.bool_], walls: NDArray[np.bool_], elev: FloatArray,
-                 threshold: FloatArray, reach: int) -> NDArray[np.bool_]:
+                 threshold: FloatArray, reach: int, trend: Trend, g: float
+                 ) -> NDArray[np.bool_]:
     """The candidates with, along some axis, a wall (a step cell or a hole) within
     ``reach`` cells on each side, lying a step below the surrounding ground
     (:func:`_below_surroundings`): the floor of a ditch between its lips (module doc,
@@ -633,38 +646,66 @@ def _walled_pits(candidates: NDArray[np.bool_], walls: NDArray[np.bool_], elev: 
         for sign in (1, -1):
             both &= _line(padded, reach, sign * di, sign * dj, reach, shape).any(axis=0)
         enclosed |= both
-    return _below_surroundings(enclosed, elev, threshold, 2 * reach)
+    return _below_surroundings(enclosed, elev, threshold, 2 * reach, trend, g)
+
+
+def _trend(gradient_x: FloatArray, gradient_y: FloatArray, tan_limit: FloatArray,
+           radius: int) -> Trend:
+    """The ground's trend around each cell (m/m along x and y): the mean gradient of the
+    planar cells within ``radius`` cells (0 where there are none), no steeper than a
+    legal slope. The rules that compare a cell with the ground around it (a raised top,
+    a pit, a sunken cell) take it out: on a 14° slope the ground 2 m downhill lies 0.5 m
+    lower, which is neither a ditch below nor an obstacle's top above."""
+    size = 2 * radius + 1
+    planar = np.isfinite(gradient_x) & np.isfinite(gradient_y)
+    count = ndimage.uniform_filter(planar.astype(np.float64), size, mode="constant")
+    mean_x = ndimage.uniform_filter(np.where(planar, gradient_x, 0.0), size, mode="constant")
+    mean_y = ndimage.uniform_filter(np.where(planar, gradient_y, 0.0), size, mode="constant")
+    some = count > 0.5 / size ** 2  # at least one planar cell (uniform_filter's rounding)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tx = np.where(some, mean_x / count, 0.0)
+        ty = np.where(some, mean_y / count, 0.0)
+        steepness = np.hypot(tx, ty)
+        legal = np.where(steepness > tan_limit, tan_limit / steepness, 1.0)
+    return tx * legal, ty * legal
 
 
 def _below_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
-                        threshold: FloatArray, radius: int) -> NDArray[np.bool_]:
+                        threshold: FloatArray, radius: int, trend: Trend, g: float
+                        ) -> NDArray[np.bool_]:
     """The candidates (known cells) lying a step (``threshold``) or more below the
     median elevation of the known cells within ``radius`` cells (a square window
-    clipped at the grid's edge): below the level of the ground around them, in a pit or
-    a ditch (module doc)."""
+    clipped at the grid's edge), the ground's trend taken out: below the level of the
+    ground around them, in a pit or a ditch (module doc)."""
     size = 2 * radius + 1  # only a cell with a known one a step above can pass (cheap)
     highest = ndimage.maximum_filter(np.where(np.isnan(elev), -np.inf, elev), size,
                                      mode="constant", cval=-np.inf)
     with np.errstate(invalid="ignore"):
         candidates = candidates & (highest - elev >= threshold)
         below: NDArray[np.bool_] = candidates & (
-            -_above_surroundings(candidates, elev, radius) >= threshold)
+            -_above_surroundings(candidates, elev, radius, trend, g) >= threshold)
     return below
 
 
 def _above_surroundings(candidates: NDArray[np.bool_], elev: FloatArray,
-                        radius: int) -> FloatArray:
+                        radius: int, trend: Trend, g: float) -> FloatArray:
     """How far each candidate (a known cell) lies above the median elevation of the
     known cells within ``radius`` cells (a square window clipped at the grid's edge),
-    the level of the ground around it; NaN elsewhere."""
+    each taken along the candidate's ground trend to the candidate (on a legal slope
+    the ground ahead is lower and behind higher, and neither is an obstacle), the level
+    of the ground around it; NaN elsewhere."""
     result = np.full(elev.shape, np.nan)
     where = np.argwhere(candidates)
     if len(where) == 0:
         return result
-    windows = np.lib.stride_tricks.sliding_window_view(
-        _padded(elev, radius, np.nan), (2 * radius + 1, 2 * radius + 1))
+    size = 2 * radius + 1
+    windows = np.lib.stride_tricks.sliding_window_view(_padded(elev, radius, np.nan),
+                                                       (size, size))
     i, j = where[:, 0], where[:, 1]
-    result[i, j] = elev[i, j] - _nan_medians(windows[i, j].reshape(len(where), -1))
+    offsets = (np.arange(size, dtype=np.float64) - radius) * g
+    levelled = (windows[i, j] - trend[0][i, j][:, None, None] * offsets[None, :, None]
+                - trend[1][i, j][:, None, None] * offsets[None, None, :])
+    result[i, j] = elev[i, j] - _nan_medians(levelled.reshape(len(where), -1))
     return result
 
 
@@ -682,10 +723,12 @@ def _nan_medians(rows: FloatArray) -> FloatArray:
 
 
 def _raised_tops(elev: FloatArray, known: NDArray[np.bool_], stepped: NDArray[np.bool_],
-                 threshold: FloatArray, reach: int) -> tuple[NDArray[np.bool_], FloatArray]:
+                 threshold: FloatArray, reach: int, trend: Trend, g: float
+                 ) -> tuple[NDArray[np.bool_], FloatArray]:
     """The tops of obstacles that the step rule cannot see (module doc, 2): known cells
     without a step of their own, within ``reach`` cells of a step cell, *bounded* (along
-    some axis each side holds, within ``reach``, a cell a step lower or an unknown one),
+    some axis each side holds, within ``reach``, a cell a step lower than the ground's
+    trend explains, or an unknown one),
     lying a step above the surrounding ground (:func:`_above_surroundings` over
     ``2·reach``), and joined to a step cell through such cells (8-connected). Returns
     the tops and their height above the surroundings (NaN elsewhere)."""
@@ -698,20 +741,22 @@ def _raised_tops(elev: FloatArray, known: NDArray[np.bool_], stepped: NDArray[np
     padded_elev = _padded(elev, reach, np.nan)
     padded_known = _padded(known, reach, False)
     bounded = none.copy()
+    steps = np.arange(1, reach + 1, dtype=np.float64)[:, None, None] * g  # k·g
     for di, dj in AXES:
         closed = near.copy()
         for sign in (1, -1):
             heights = _line(padded_elev, reach, sign * di, sign * dj, reach, shape)
             seen = _line(padded_known, reach, sign * di, sign * dj, reach, shape)
+            expected = sign * steps * (di * trend[0] + dj * trend[1])  # the trend's rise
             with np.errstate(invalid="ignore"):
-                closed &= (~seen | (heights <= elev - threshold)).any(axis=0)
+                closed &= (~seen | (heights - expected <= elev - threshold)).any(axis=0)
         bounded |= closed
     size = 4 * reach + 1  # only a cell with a known one a step below can pass (cheap)
     lowest = ndimage.minimum_filter(np.where(np.isnan(elev), np.inf, elev), size,
                                     mode="constant", cval=np.inf)
     with np.errstate(invalid="ignore"):
         bounded &= elev - lowest >= threshold
-    above = _above_surroundings(bounded, elev, 2 * reach)
+    above = _above_surroundings(bounded, elev, 2 * reach, trend, g)
     with np.errstate(invalid="ignore"):
         raised = bounded & (above >= threshold)
     labels, _ = ndimage.label(raised | stepped, ring)

@@ -189,14 +189,35 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
                 best = max(best, good[(ii, jj)])
         return best
 
-    def below_ground(i: int, j: int, t: float) -> bool:
-        """A step below the median of the known elevations within 2·reach cells."""
-        around = sorted(elev(ii, jj) for ii in range(i - 2 * reach, i + 2 * reach + 1)
+    def ground_trend(i: int, j: int) -> tuple[float, float]:
+        """The ground's trend: the mean gradient of the planar cells within 2·reach
+        cells (0 if none), no steeper than the cell's slope limit."""
+        found = [gradients[(ii, jj)] for ii in range(i - 2 * reach, i + 2 * reach + 1)
+                 for jj in range(j - 2 * reach, j + 2 * reach + 1) if (ii, jj) in gradients]
+        if not found:
+            return 0.0, 0.0
+        tx = sum(f[0] for f in found) / len(found)
+        ty = sum(f[1] for f in found) / len(found)
+        limit = math.tan(math.radians(params(i, j)[2]))
+        steep = math.hypot(tx, ty)
+        if steep > limit:
+            tx, ty = tx * limit / steep, ty * limit / steep
+        return tx, ty
+
+    def ground_median(i: int, j: int) -> float:
+        """The median of the known elevations within 2·reach cells, each brought along
+        the cell's ground trend to the cell."""
+        tx, ty = ground_trend(i, j)
+        around = sorted(elev(ii, jj) - tx * (ii - i) * g - ty * (jj - j) * g
+                        for ii in range(i - 2 * reach, i + 2 * reach + 1)
                         for jj in range(j - 2 * reach, j + 2 * reach + 1)
                         if 0 <= ii < rows and 0 <= jj < cols and cell(ii, jj) is not None)
         n = len(around)
-        median = around[n // 2] if n % 2 else (around[n // 2 - 1] + around[n // 2]) / 2
-        return median - elev(i, j) >= t
+        return around[n // 2] if n % 2 else (around[n // 2 - 1] + around[n // 2]) / 2
+
+    def below_ground(i: int, j: int, t: float) -> bool:
+        """A step below the ground around (ground_median)."""
+        return ground_median(i, j) - elev(i, j) >= t
 
     stepped: set[tuple[int, int]] = set()  # known cells with step >= T
     for i in range(rows):
@@ -221,18 +242,18 @@ def reference(terrain: TerrainLayers, coarse: GridGeometry, rules: HazardRules,
     # the tops of low, wide obstacles: near a step, bounded, a step above the ground
     # around them, joined to a step cell through such cells
     def above_ground(i: int, j: int) -> float:
-        around = sorted(elev(ii, jj) for ii in range(i - 2 * reach, i + 2 * reach + 1)
-                        for jj in range(j - 2 * reach, j + 2 * reach + 1)
-                        if 0 <= ii < rows and 0 <= jj < cols and cell(ii, jj) is not None)
-        n = len(around)
-        median = around[n // 2] if n % 2 else (around[n // 2 - 1] + around[n // 2]) / 2
-        return elev(i, j) - median
+        return elev(i, j) - ground_median(i, j)
 
     def off_level(i: int, j: int, di: int, dj: int, sign: int, t: float) -> bool:
+        """A cell a step lower than the trend explains, or an unknown one, on this side."""
+        tx, ty = ground_trend(i, j)
         for k in range(1, reach + 1):
             ii, jj = i + sign * k * di, j + sign * k * dj
             b = cell(ii, jj) if (0 <= ii < rows and 0 <= jj < cols) else None
-            if b is None or b[1] / b[0] <= elev(i, j) - t:
+            if b is None:
+                return True
+            expected = sign * k * g * (di * tx + dj * ty)
+            if b[1] / b[0] - expected <= elev(i, j) - t:
                 return True
         return False
 
@@ -686,6 +707,29 @@ def test_the_top_of_a_low_wide_box_seen_from_one_side_is_a_hazard() -> None:
     assert np.all(layers.hazard[top, j] == 1.0) and flagged(layers, FLAG_STEP)[top, j].all()
     assert np.all(layers.hazard[rows_at(-4.0, 3.4)] == 0.0)  # the ground in front
     assert not flagged(layers, FLAG_HOLE).any()
+
+
+@pytest.mark.parametrize("angle", [8.0, 14.0, 18.0])
+def test_downhill_ground_by_a_rock_is_not_an_obstacle_top(angle: float) -> None:
+    """The ego map starts at the bumper (nothing known behind it) and the vehicle faces
+    down a legal slope with a 1 m rock 2 m ahead: the ground between them lies above the
+    ground further down, and on this side is bounded by the map's edge, but it is the
+    slope's own level, not the top of an obstacle. (Compared with the raw median of the
+    ground around, it read as a plateau: a 6 m wide band of steps at the bumper that
+    vetoed every arc and kept the vehicle backing and returning there for ever.)"""
+    grade = math.tan(math.radians(angle))
+    x, y = FINE.centres()
+
+    def ground(xx: np.ndarray, yy: np.ndarray) -> np.ndarray:
+        rock = np.hypot(xx - 2.0, yy - 1.7) <= 0.4
+        return -grade * xx + relief(xx, yy) + np.where(rock, 1.0, 0.0)
+
+    layers = check_against_reference(terrain_from(ground, known=x >= 0.0),
+                                     vehicle=(-2.5, 0.0))
+    rows, cols = np.nonzero(flagged(layers, FLAG_STEP) | flagged(layers, FLAG_SUNKEN))
+    cx = COARSE.origin_x + (rows + 0.5) * COARSE.gridsize
+    cy = COARSE.origin_y + (cols + 0.5) * COARSE.gridsize
+    assert len(rows) and np.all(np.hypot(cx - 2.0, cy - 1.7) < 1.2)  # the rock's cells
 
 
 def test_a_smooth_hill_top_is_not_an_obstacle_top() -> None:
