@@ -45,7 +45,14 @@ from afa.bridge.info import memory
 from afa.errors import AfaError, ComponentError
 from afa.events import Event, Overflow
 from afa.log import format as fmt
-from afa.log.viewer import SCHEMAS, TF_TOPIC, VEHICLE_FRAME, ViewerConverter, dumps
+from afa.log.viewer import (
+    ENCODINGS,
+    TF_TOPIC,
+    VEHICLE_FRAME,
+    ViewerConverter,
+    dumps,
+    schema_of,
+)
 from afa.log.writer import COMPRESSIONS, ZSTD_LEVEL, McapWriter
 from afa.polling import LocalInvoker, PollRecord, encode_arguments, encode_result, proxy_for
 from afa.ports import Direction, interface_name
@@ -344,20 +351,24 @@ class Recorder:
                 self._system.clock.monotonic() - self._static_written_at >= STATIC_TF_PERIOD):
             self._write_static_tf(nanoseconds)
 
-    def _write_json(self, topic: str, schema_name: str, message: dict[str, Any] | bytes,
+    def _write_json(self, topic: str, schema_name: str,
+                    message: dict[str, Any] | bytes | list[bytes | memoryview],
                     nanoseconds: int) -> None:
+        """A viewer message: a JSON-ready dict, or its encoded bytes (JSON, or protobuf
+        as a list of parts, :data:`afa.log.viewer.ENCODINGS`)."""
         key = ("viewer", topic, schema_name)
         channel = self._channels.get(key)
         if channel is None:
             schema = self._schemas.get(schema_name)
             if schema is None:
                 schema = self._schemas[schema_name] = self._writer.register_schema(
-                    schema_name, fmt.SCHEMA_ENCODING, json.dumps(SCHEMAS[schema_name]).encode())
+                    schema_name, *schema_of(schema_name))
             channel = self._channels[key] = self._writer.register_channel(
-                topic, fmt.JSON_ENCODING, schema, {fmt.KIND: fmt.VIEWER},
-                group=VIEWER_GROUP)
-        data = message if isinstance(message, bytes) else dumps(message)
-        self._writer.add_message(channel, nanoseconds, data, nanoseconds)
+                topic, ENCODINGS.get(schema_name, fmt.JSON_ENCODING), schema,
+                {fmt.KIND: fmt.VIEWER}, group=VIEWER_GROUP)
+        self._writer.add_message(channel, nanoseconds,
+                                 dumps(message) if isinstance(message, dict) else message,
+                                 nanoseconds)
         self.viewer_written += 1
 
     def _static_tf_later(self) -> None:
