@@ -53,7 +53,7 @@ from afa.log.viewer import (
     dumps,
     schema_of,
 )
-from afa.log.writer import COMPRESSIONS, ZSTD_LEVEL, McapWriter
+from afa.log.writer import CHUNK_SIZE, COMPRESSIONS, ZSTD_LEVEL, McapWriter
 from afa.polling import LocalInvoker, PollRecord, encode_arguments, encode_result, proxy_for
 from afa.ports import Direction, interface_name
 from afa.tasks import spawn
@@ -107,7 +107,7 @@ class Recorder:
 
     def __init__(self, path: str | Path, *, events: Iterable[str] | None = None,
                  compression: str = "zstd", level: int = ZSTD_LEVEL,
-                 chunk_size: int = 1 << 20, threaded: bool = True, viewer: bool = True,
+                 chunk_size: int = CHUNK_SIZE, threaded: bool = True, viewer: bool = True,
                  flush_period: float = 1.0, maxsize: int = 1 << 16, poll_buffer: int = 4096,
                  batch_period: float = BATCH_PERIOD,
                  on_flush: Callable[[int], None] | None = None) -> None:
