@@ -460,7 +460,7 @@ def test_the_protobuf_schemas_are_foxglove_s_field_for_field():
 def test_protobuf_values_at_their_limits_decode_as_written():
     """Varints of every length, negative and signed-zero doubles, empty data."""
     cls = message_class("foxglove.PointCloud", protobuf.SCHEMAS["foxglove.PointCloud"])
-    for seconds, nanos in ((0, 0), (1, 1), (127, 128), (2**31, 999_999_999),
+    for seconds, nanos in ((0, 0), (1, 1), (127, 128), (16383, 16384), (2**31, 999_999_999),
                            (2**63 - 1, 5)):
         origin = protobuf.pose((-0.0, -1.5e-300, 2.0**70), (0.0, -0.0, 1e308, -1.0))
         parts = protobuf.point_cloud(seconds, nanos, "frame \u00e9",
