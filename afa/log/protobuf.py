@@ -166,7 +166,7 @@ def grid(seconds: int, nanos: int, frame: str, origin: bytes, columns: int,
 def byte_view(array: np.ndarray) -> memoryview:
     """A C-contiguous array's bytes as a flat byte view (no copy)."""
     if array.size:
-        return memoryview(array).cast("B")
+        return array.data.cast("B")
     return memoryview(b"")
 
 
