@@ -30,19 +30,16 @@ from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import IO, Any, NamedTuple
 
-__all__ = ["McapWriter", "MAGIC", "COMPRESSIONS", "ZSTD_LEVEL", "ZSTD_WINDOW_LOG", "CHUNK_SIZE"]
+__all__ = ["McapWriter", "MAGIC", "COMPRESSIONS", "ZSTD_LEVEL", "CHUNK_SIZE"]
 
 MAGIC = b"\x89MCAP0\r\n"
 COMPRESSIONS = ("zstd", "lz4", "none")
 #: The zstd level afa records at (the ``mcap`` package's writer uses 3).
 ZSTD_LEVEL = 2
-#: zstd's window (log2 bytes): a whole chunk (up to 4 MB), so a map or a point cloud
-#: finds the previous one of its kind in the same chunk (decision 0036; level 2 alone
-#: would use 1 MB).
-ZSTD_WINDOW_LOG = 22
-#: The chunk size afa records with: a flush (every second) finishes the chunks first,
-#: so a chunk holds about a second of its group's messages (decision 0036).
-CHUNK_SIZE = 1 << 22
+#: The chunk size afa records with. Not larger (decision 0036): a flush (every second)
+#: waits for the open chunks' compression, and 4 MB chunks, which compress 15 % smaller
+#: with a 4 MB zstd window, made that wait 0.3 s of a 30 s teleop run instead of 0.1 s.
+CHUNK_SIZE = 1 << 20
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
 _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX = 0x06, 0x07, 0x08
@@ -131,9 +128,8 @@ class McapWriter:
             import zstandard
 
             # the frame's own checksum (XXH64) stands for the chunk's CRC (decision 0036)
-            self._compress = zstandard.ZstdCompressor(
-                compression_params=zstandard.ZstdCompressionParameters.from_level(
-                    level, window_log=ZSTD_WINDOW_LOG, write_checksum=True)).compress
+            self._compress = zstandard.ZstdCompressor(level=level,
+                                                      write_checksum=True).compress
         elif compression == "lz4":
             import lz4.frame
 
