@@ -280,17 +280,15 @@ def point_cloud(stamp: TimeIDL, frame: str, points: np.ndarray) -> dict[str, Any
             "data": base64.b64encode(data.data).decode("ascii")}
 
 
-def grid(body: Any, layers: Iterable[str], *, data: str | None = None) -> dict[str, Any]:
+def grid(body: Any, layers: Iterable[str]) -> dict[str, Any]:
     """``foxglove.Grid`` of a map's ``layers`` (float32 each), placed in the world frame.
 
     afa's cell [i, j] lies at map x = originX + i·g, y = originY + j·g (i along x); a
     Foxglove grid is row-major with rows along y, so its data is the layers transposed.
     """
     names = list(layers)
-    if data is None:
-        stack = np.stack([np.asarray(getattr(body, n), dtype="<f4").T for n in names],
-                         axis=-1)
-        data = base64.b64encode(np.ascontiguousarray(stack).data).decode("ascii")
+    stack = np.stack([np.asarray(getattr(body, n), dtype="<f4").T for n in names], axis=-1)
+    data = base64.b64encode(np.ascontiguousarray(stack).data).decode("ascii")
     corner = np.eye(4)
     corner[0, 3], corner[1, 3] = body.originX, body.originY
     pose = np.asarray(body.mapPose) @ corner
@@ -309,11 +307,6 @@ def _time_json(stamp: TimeIDL | float) -> str:
     if isinstance(stamp, TimeIDL):
         return f'{{"sec":{max(0, int(stamp.sec))},"nsec":{int(stamp.usec) * 1000}}}'
     return _compact(_time(stamp))
-
-
-@functools.lru_cache(maxsize=256)
-def _string_json(text: str) -> str:
-    return json.dumps(text)
 
 
 def _stamp(stamp: TimeIDL) -> tuple[int, int]:
