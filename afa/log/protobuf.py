@@ -1,4 +1,4 @@
-"""Protocol Buffers for the viewer channels that carry arrays (decision 0036).
+"""Protocol Buffers for the viewer channels that carry arrays (decision 0037).
 
 The viewer channels of point clouds and grids are written as Foxglove's protobuf
 schemas ``foxglove.PointCloud`` and ``foxglove.Grid`` (message encoding ``protobuf``,

@@ -3,7 +3,7 @@ Foxglove or Lichtblick (their 3-D panel draws a topic only if its schema name is
 one of Foxglove's), and only long-standing schemas Lichtblick also reads. Point clouds
 and grids are protobuf messages (message and schema encoding ``protobuf``, the schema a
 FileDescriptorSet, :mod:`afa.log.protobuf`): their data binary, not base64 (decision
-0036); the others JSON (schema encoding ``jsonschema``, message encoding ``json``):
+0037); the others JSON (schema encoding ``jsonschema``, message encoding ``json``):
 
 ================================  ======================  ==================================
 afa body                          topic                   Foxglove schema
@@ -165,7 +165,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
 }
 
 
-#: The viewer channels written as protobuf (their data binary, decision 0036), by schema
+#: The viewer channels written as protobuf (their data binary, decision 0037), by schema
 #: name; the others are JSON.
 ENCODINGS: dict[str, str] = {"foxglove.PointCloud": protobuf.ENCODING,
                              "foxglove.Grid": protobuf.ENCODING}

@@ -36,7 +36,7 @@ MAGIC = b"\x89MCAP0\r\n"
 COMPRESSIONS = ("zstd", "lz4", "none")
 #: The zstd level afa records at (the ``mcap`` package's writer uses 3).
 ZSTD_LEVEL = 2
-#: The chunk size afa records with. Not larger (decision 0036): a flush (every second)
+#: The chunk size afa records with. Not larger (decision 0037): a flush (every second)
 #: waits for the open chunks' compression, and 4 MB chunks, which compress 15 % smaller
 #: with a 4 MB zstd window, made that wait 0.3 s of a 30 s teleop run instead of 0.1 s.
 CHUNK_SIZE = 1 << 20
@@ -127,7 +127,7 @@ class McapWriter:
         if compression == "zstd":
             import zstandard
 
-            # the frame's own checksum (XXH64) stands for the chunk's CRC (decision 0036)
+            # the frame's own checksum (XXH64) stands for the chunk's CRC (decision 0037)
             self._compress = zstandard.ZstdCompressor(level=level,
                                                       write_checksum=True).compress
         elif compression == "lz4":
@@ -307,7 +307,7 @@ class McapWriter:
         """A chunk's records compressed, and their CRC (in the worker thread if any:
         zstandard, lz4 and zlib release the GIL on large buffers). A compressed chunk's
         CRC is 0, "not computed" in MCAP: its zstd or lz4 frame carries a checksum of
-        the same records, which the decompressor checks (decision 0036)."""
+        the same records, which the decompressor checks (decision 0037)."""
         if self._compress is None:
             return data, zlib.crc32(data)
         return self._compress(data), 0
