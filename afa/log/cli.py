@@ -20,6 +20,7 @@ import numpy as np
 
 from afa.errors import AfaError
 from afa.log import format as fmt
+from afa.log import protobuf
 from afa.log.reader import LogChannel, LogError, LogReader
 from afa.log.reader import recover as recover_file
 from afa.log.recorder import Recorder
@@ -154,6 +155,7 @@ def _echo_lines(reader: LogReader, channels: list[LogChannel], as_json: bool
 
     start = fmt.from_ns(reader.start)
     interfaces = known_interfaces()
+    decoders: dict[str, protobuf.Decoder] = {}
     for message in reader.messages(channels=[c.id for c in channels]):
         channel = message.channel
         record: dict[str, Any] = {"t": round(message.time - start, 6), "topic": channel.topic}
@@ -167,6 +169,12 @@ def _echo_lines(reader: LogReader, channels: list[LogChannel], as_json: bool
                               else _brief(event.body))
         elif channel.encoding == fmt.JSON_ENCODING:
             record["body"] = json.loads(message.data)
+        elif channel.encoding == protobuf.ENCODING:
+            try:
+                record["body"] = _protobuf_decoder(reader, channel, decoders).decode(
+                    channel.schema, message.data)
+            except ValueError as exc:
+                record["undecodable"] = f"protobuf: {exc}"
         else:
             body = reader.decode_wire(message)
             if body is None:
@@ -190,6 +198,17 @@ def _echo_lines(reader: LogReader, channels: list[LogChannel], as_json: bool
             else:
                 record["body"] = json.loads(body.to_json()) if as_json else _brief(body)
         yield json.dumps(record) if as_json else _text(record)
+
+
+def _protobuf_decoder(reader: LogReader, channel: LogChannel,
+                      decoders: dict[str, protobuf.Decoder]) -> protobuf.Decoder:
+    """The decoder of a protobuf channel's schema (its FileDescriptorSet), made once."""
+    decoder = decoders.get(channel.schema)
+    if decoder is None:
+        data = next((data for name, encoding, data in reader.schemas.values()
+                     if name == channel.schema and encoding == protobuf.ENCODING), b"")
+        decoder = decoders[channel.schema] = protobuf.Decoder(data)
+    return decoder
 
 
 def _jsonable(value: Any, as_json: bool) -> Any:

@@ -16,8 +16,9 @@ topic                               message encoding  data
                                                      (``afa top --log``): per component its
                                                      state, health, restarts, events in and
                                                      out and loop time; the clock and memory
-``/viz/...``                        ``json``         Foxglove schemas, for viewers
-                                                     (:mod:`afa.log.viewer`)
+``/viz/...``                        ``json`` or      Foxglove schemas, for viewers
+                                    ``protobuf``     (:mod:`afa.log.viewer`; point clouds
+                                                     and grids in protobuf)
 ==================================  ===============  ==========================================
 
 Event and poll channels have schema encoding ``jsonschema``: the schema's name is the

@@ -7,8 +7,9 @@
 - a file cut off by a killed process (no summary): one linear scan of the records builds
   the same chunk index, up to the last complete chunk (the last flush); every chunk after
   that point is lost, and :attr:`LogReader.problems` says where the file ends;
-- a damaged chunk (bad CRC, undecompressible): its messages are skipped with a problem
-  naming the chunk's byte offset and time range; the others are read;
+- a damaged chunk (bad CRC or frame checksum, undecompressible): its messages are
+  skipped with a problem naming the chunk's byte offset and time range; the others are
+  read;
 - a file that is not MCAP: :class:`LogError` naming the file.
 
 Messages come in time order (log time, then file position) from a merge over the chunks
@@ -97,7 +98,7 @@ class LogChannel:
 
     id: int
     topic: str
-    encoding: str  #: message encoding: afa-event, afa-wire, json
+    encoding: str  #: message encoding: afa-event, afa-wire, json, protobuf
     schema: str  #: schema name: a versioned IDL type name, or a Foxglove schema
     metadata: dict[str, str] = field(default_factory=dict, compare=False)
 

@@ -45,8 +45,15 @@ from afa.bridge.info import memory
 from afa.errors import AfaError, ComponentError
 from afa.events import Event, Overflow
 from afa.log import format as fmt
-from afa.log.viewer import SCHEMAS, TF_TOPIC, VEHICLE_FRAME, ViewerConverter, dumps
-from afa.log.writer import COMPRESSIONS, ZSTD_LEVEL, McapWriter
+from afa.log.viewer import (
+    ENCODINGS,
+    TF_TOPIC,
+    VEHICLE_FRAME,
+    ViewerConverter,
+    dumps,
+    schema_of,
+)
+from afa.log.writer import CHUNK_SIZE, COMPRESSIONS, ZSTD_LEVEL, McapWriter
 from afa.polling import LocalInvoker, PollRecord, encode_arguments, encode_result, proxy_for
 from afa.ports import Direction, interface_name
 from afa.tasks import spawn
@@ -100,7 +107,7 @@ class Recorder:
 
     def __init__(self, path: str | Path, *, events: Iterable[str] | None = None,
                  compression: str = "zstd", level: int = ZSTD_LEVEL,
-                 chunk_size: int = 1 << 20, threaded: bool = True, viewer: bool = True,
+                 chunk_size: int = CHUNK_SIZE, threaded: bool = True, viewer: bool = True,
                  flush_period: float = 1.0, maxsize: int = 1 << 16, poll_buffer: int = 4096,
                  batch_period: float = BATCH_PERIOD,
                  on_flush: Callable[[int], None] | None = None) -> None:
@@ -344,20 +351,24 @@ class Recorder:
                 self._system.clock.monotonic() - self._static_written_at >= STATIC_TF_PERIOD):
             self._write_static_tf(nanoseconds)
 
-    def _write_json(self, topic: str, schema_name: str, message: dict[str, Any] | bytes,
+    def _write_json(self, topic: str, schema_name: str,
+                    message: dict[str, Any] | bytes | list[bytes | memoryview],
                     nanoseconds: int) -> None:
+        """A viewer message: a JSON-ready dict, or its encoded bytes (JSON, or protobuf
+        as a list of parts, :data:`afa.log.viewer.ENCODINGS`)."""
         key = ("viewer", topic, schema_name)
         channel = self._channels.get(key)
         if channel is None:
             schema = self._schemas.get(schema_name)
             if schema is None:
                 schema = self._schemas[schema_name] = self._writer.register_schema(
-                    schema_name, fmt.SCHEMA_ENCODING, json.dumps(SCHEMAS[schema_name]).encode())
+                    schema_name, *schema_of(schema_name))
             channel = self._channels[key] = self._writer.register_channel(
-                topic, fmt.JSON_ENCODING, schema, {fmt.KIND: fmt.VIEWER},
-                group=VIEWER_GROUP)
-        data = message if isinstance(message, bytes) else dumps(message)
-        self._writer.add_message(channel, nanoseconds, data, nanoseconds)
+                topic, ENCODINGS.get(schema_name, fmt.JSON_ENCODING), schema,
+                {fmt.KIND: fmt.VIEWER}, group=VIEWER_GROUP)
+        self._writer.add_message(channel, nanoseconds,
+                                 dumps(message) if isinstance(message, dict) else message,
+                                 nanoseconds)
         self.viewer_written += 1
 
     def _static_tf_later(self) -> None:
@@ -451,7 +462,8 @@ class Recorder:
                 {fmt.KIND: fmt.POLL, "afa.server": record.name,
                  "afa.interface": interface_name(interface), "afa.method": record.method})
         nanoseconds = fmt.to_ns(record.time)
-        self._writer.add_message(channel, nanoseconds, wire.encode(body), nanoseconds)
+        # the parts, copied once into the chunk (a getPlanMap result is 4 MB)
+        self._writer.add_message(channel, nanoseconds, wire.encode_parts(body), nanoseconds)
         self.polls_written += 1
 
     # -- flushing and drops --------------------------------------------------------------

@@ -1,7 +1,9 @@
 """Viewer channels: afa events as Foxglove schemas, so a recording opens usefully in
 Foxglove or Lichtblick (their 3-D panel draws a topic only if its schema name is exactly
-one of Foxglove's). JSON messages (schema encoding ``jsonschema``, message encoding
-``json``, bytes in base64), and only long-standing schemas Lichtblick also reads:
+one of Foxglove's), and only long-standing schemas Lichtblick also reads. Point clouds
+and grids are protobuf messages (message and schema encoding ``protobuf``, the schema a
+FileDescriptorSet, :mod:`afa.log.protobuf`): their data binary, not base64 (decision
+0038); the others JSON (schema encoding ``jsonschema``, message encoding ``json``):
 
 ================================  ======================  ==================================
 afa body                          topic                   Foxglove schema
@@ -34,7 +36,6 @@ points are drawn at full rate.
 from __future__ import annotations
 
 import base64
-import binascii
 import functools
 import json
 import math
@@ -43,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from afa.log import protobuf
 from idl import (
     ArcVoteIDL,
     EgoMapArrayEventIDL,
@@ -62,8 +64,8 @@ from idl._base import IDLModel
 __all__ = ["WORLD_FRAME", "VEHICLE_FRAME", "TF_TOPIC", "SCHEMAS", "ViewerMessage",
            "VOTE_INTERVAL", "GRID_INTERVAL",
            "ViewerConverter", "pose_in_frame", "frame_transform", "point_cloud", "grid",
-           "point_cloud_json", "grid_json", "arc_votes", "arc_votes_json", "pose_json",
-           "quaternion", "viewer_topic"]
+           "point_cloud_protobuf", "grid_protobuf", "arc_votes", "arc_votes_json",
+           "pose_json", "quaternion", "viewer_topic", "ENCODINGS", "schema_of"]
 
 #: The frame ``Pose`` events place the vehicle in (x east, y north, origin initialUTM).
 WORLD_FRAME = "world"
@@ -162,6 +164,19 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "entities": {"type": "array", "items": _ENTITY}}),
 }
 
+
+#: The viewer channels written as protobuf (their data binary, decision 0038), by schema
+#: name; the others are JSON.
+ENCODINGS: dict[str, str] = {"foxglove.PointCloud": protobuf.ENCODING,
+                             "foxglove.Grid": protobuf.ENCODING}
+
+
+def schema_of(name: str) -> tuple[str, bytes]:
+    """(schema encoding, schema data) of a Foxglove schema as the recorder writes it:
+    ``protobuf`` and its FileDescriptorSet, or ``jsonschema`` and its JSON schema."""
+    if ENCODINGS.get(name) == protobuf.ENCODING:
+        return protobuf.ENCODING, protobuf.SCHEMAS[name]
+    return "jsonschema", json.dumps(SCHEMAS[name]).encode()
 
 # -- conversions ---------------------------------------------------------------------------
 
@@ -265,17 +280,15 @@ def point_cloud(stamp: TimeIDL, frame: str, points: np.ndarray) -> dict[str, Any
             "data": base64.b64encode(data.data).decode("ascii")}
 
 
-def grid(body: Any, layers: Iterable[str], *, data: str | None = None) -> dict[str, Any]:
+def grid(body: Any, layers: Iterable[str]) -> dict[str, Any]:
     """``foxglove.Grid`` of a map's ``layers`` (float32 each), placed in the world frame.
 
     afa's cell [i, j] lies at map x = originX + i·g, y = originY + j·g (i along x); a
     Foxglove grid is row-major with rows along y, so its data is the layers transposed.
     """
     names = list(layers)
-    if data is None:
-        stack = np.stack([np.asarray(getattr(body, n), dtype="<f4").T for n in names],
-                         axis=-1)
-        data = base64.b64encode(np.ascontiguousarray(stack).data).decode("ascii")
+    stack = np.stack([np.asarray(getattr(body, n), dtype="<f4").T for n in names], axis=-1)
+    data = base64.b64encode(np.ascontiguousarray(stack).data).decode("ascii")
     corner = np.eye(4)
     corner[0, 3], corner[1, 3] = body.originX, body.originY
     pose = np.asarray(body.mapPose) @ corner
@@ -296,43 +309,41 @@ def _time_json(stamp: TimeIDL | float) -> str:
     return _compact(_time(stamp))
 
 
-@functools.lru_cache(maxsize=256)
-def _string_json(text: str) -> str:
-    return json.dumps(text)
+def _stamp(stamp: TimeIDL) -> tuple[int, int]:
+    """``_time(stamp)`` as (seconds, nanoseconds)."""
+    return max(0, int(stamp.sec)), int(stamp.usec) * 1000
 
 
-def _base64(array: np.ndarray) -> bytes:
-    """The bytes of a C-contiguous array in base64, without a newline (binascii reads
-    the array's buffer: no intermediate bytes or str)."""
-    return binascii.b2a_base64(array.data, newline=False)
-
-
-_CLOUD_MIDDLE = (',"pose":' + json.dumps(_IDENTITY_POSE, separators=(",", ":"))
-                 + ',"point_stride":12,"fields":' + json.dumps(_XYZ, separators=(",", ":"))
-                 + ',"data":"')
-
-
-def point_cloud_json(stamp: TimeIDL | float, frame: str, points: np.ndarray) -> bytes:
-    """``dumps(point_cloud(stamp, frame, points))``, the same bytes (a test compares
-    them) without building the base64 text as a str and scanning it again in json: the
-    viewer channel written most (a laser scan line every 12 ms, a stereo frame of ~30 000
-    points)."""
+def point_cloud_protobuf(stamp: TimeIDL, frame: str, points: np.ndarray
+                         ) -> list[bytes | memoryview]:
+    """:func:`point_cloud` as protobuf (:mod:`afa.log.protobuf`), the parts of its bytes:
+    the points' bytes are not copied (the recorder copies them once, into the chunk);
+    the viewer channel written most (a laser scan line every 12 ms, a stereo frame of
+    ~30 000 points)."""
     data = np.ascontiguousarray(points, dtype="<f4")
-    head = f'{{"timestamp":{_time_json(stamp)},"frame_id":{_string_json(frame)}'
-    return b"".join((head.encode(), _CLOUD_MIDDLE.encode(), _base64(data), b'"}'))
+    return protobuf.point_cloud(*_stamp(stamp), frame, protobuf.byte_view(data))
 
 
-def grid_json(body: Any, layers: Iterable[str]) -> bytes:
-    """``dumps(grid(body, layers))``, the same bytes (a test compares them): the header
-    through json (it is small), the cells' base64 spliced in."""
-    names = list(layers)
+def grid_protobuf(body: Any, layers: Iterable[str]) -> list[bytes | memoryview]:
+    """:func:`grid` as protobuf (:mod:`afa.log.protobuf`), the parts of its bytes."""
+    names = tuple(layers)
     cells = [np.asarray(getattr(body, name)).T for name in names]
     stack = np.empty((*cells[0].shape, len(cells)), dtype="<f4")
     for k, layer in enumerate(cells):
         stack[..., k] = layer  # one strided copy per layer, no intermediate float32 arrays
-    # the data string is the document's last value: '..."data":""}'
-    text = _compact(grid(body, names, data=""))
-    return b"".join((text[:-2].encode(), _base64(stack), b'"}'))
+    corner = np.eye(4)
+    corner[0, 3], corner[1, 3] = body.originX, body.originY
+    rows = (np.asarray(body.mapPose) @ corner).tolist()
+    origin = protobuf.pose((rows[0][3], rows[1][3], rows[2][3]), _quaternion(rows))
+    size = float(body.gridsize)
+    return protobuf.grid(*_stamp(body.time), WORLD_FRAME, origin, int(body.rows),
+                         (size, size), 4 * len(names), _layer_fields(names),
+                         protobuf.byte_view(stack))
+
+
+@functools.lru_cache(maxsize=32)
+def _layer_fields(names: tuple[str, ...]) -> tuple[tuple[str, int, int], ...]:
+    return tuple((name, 4 * k, FLOAT32) for k, name in enumerate(names))
 
 
 def _arc(curvature: float) -> list[dict[str, float]]:
@@ -465,9 +476,10 @@ class ViewerConverter:
         return True
 
     def encode(self, event_type: str, origin: str, body: IDLModel
-               ) -> list[tuple[str, str, bytes]]:
-        """:meth:`convert` as JSON bytes, what the recorder writes: the same documents,
-        with votes, point clouds and maps encoded the fast way (``*_json``)."""
+               ) -> list[tuple[str, str, bytes | list[bytes | memoryview]]]:
+        """:meth:`convert` encoded, what the recorder writes: the same documents, poses
+        and votes as JSON bytes encoded the fast way (``*_json``), point clouds and grids
+        as protobuf (:data:`ENCODINGS`), the parts of their bytes."""
         kind = type(body)
         if kind is PoseTransformIDL:
             in_frame, transform = pose_json(body)  # type: ignore[arg-type]
@@ -482,12 +494,12 @@ class ViewerConverter:
             if points is None:
                 return []
             return [(viewer_topic(event_type), "foxglove.PointCloud",
-                     point_cloud_json(body.time, body.frame, points))]  # type: ignore[attr-defined]
+                     point_cloud_protobuf(body.time, body.frame, points))]  # type: ignore[attr-defined]
         if kind in _MAP_LAYERS:
             if not self._due(event_type, origin, body):
                 return []
             return [(viewer_topic(event_type), "foxglove.Grid",
-                     grid_json(body, _MAP_LAYERS[kind]))]
+                     grid_protobuf(body, _MAP_LAYERS[kind]))]
         return [(topic, schema, dumps(message))
                 for topic, schema, message in self.convert(event_type, origin, body)]
 

@@ -20,6 +20,7 @@ uses is supported: no attachments, always chunked.
 
 from __future__ import annotations
 
+import functools
 import struct
 import sys
 import zlib
@@ -29,12 +30,16 @@ from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import IO, Any, NamedTuple
 
-__all__ = ["McapWriter", "MAGIC", "COMPRESSIONS", "ZSTD_LEVEL"]
+__all__ = ["McapWriter", "MAGIC", "COMPRESSIONS", "ZSTD_LEVEL", "CHUNK_SIZE"]
 
 MAGIC = b"\x89MCAP0\r\n"
 COMPRESSIONS = ("zstd", "lz4", "none")
 #: The zstd level afa records at (the ``mcap`` package's writer uses 3).
 ZSTD_LEVEL = 2
+#: The chunk size afa records with. Not larger (decision 0038): a flush (every second)
+#: waits for the open chunks' compression, and 4 MB chunks, which compress 15 % smaller
+#: with a 4 MB zstd window, made that wait 0.3 s of a 30 s teleop run instead of 0.1 s.
+CHUNK_SIZE = 1 << 20
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
 _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX = 0x06, 0x07, 0x08
@@ -112,7 +117,7 @@ class McapWriter:
     """
 
     def __init__(self, stream: IO[bytes], *, compression: str = "zstd",
-                 level: int = ZSTD_LEVEL, chunk_size: int = 1 << 20,
+                 level: int = ZSTD_LEVEL, chunk_size: int = CHUNK_SIZE,
                  threaded: bool = False) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"unknown compression {compression!r}")
@@ -122,11 +127,13 @@ class McapWriter:
         if compression == "zstd":
             import zstandard
 
-            self._compress = zstandard.ZstdCompressor(level=level).compress
+            # the frame's own checksum (XXH64) stands for the chunk's CRC (decision 0038)
+            self._compress = zstandard.ZstdCompressor(level=level,
+                                                      write_checksum=True).compress
         elif compression == "lz4":
             import lz4.frame
 
-            self._compress = lz4.frame.compress
+            self._compress = functools.partial(lz4.frame.compress, content_checksum=True)
         self._chunk_size = chunk_size
         self._position = 0
         self._crc = 0  # of the data section, magic included
@@ -298,9 +305,12 @@ class McapWriter:
 
     def _pack(self, data: bytearray) -> tuple[bytes | bytearray, int]:
         """A chunk's records compressed, and their CRC (in the worker thread if any:
-        zstandard, lz4 and zlib release the GIL on large buffers)."""
-        compressed = self._compress(data) if self._compress is not None else data
-        return compressed, zlib.crc32(data)
+        zstandard, lz4 and zlib release the GIL on large buffers). A compressed chunk's
+        CRC is 0, "not computed" in MCAP: its zstd or lz4 frame carries a checksum of
+        the same records, which the decompressor checks (decision 0038)."""
+        if self._compress is None:
+            return data, zlib.crc32(data)
+        return self._compress(data), 0
 
     def _write_ready(self, *, wait: bool) -> None:
         """Write the compressed chunks, in the order they were finished: those done

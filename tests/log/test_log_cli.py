@@ -180,3 +180,29 @@ def test_replay_loop_starts_again_at_start(recorded, monkeypatch, capsys):
     assert 1.9 <= times[0] <= 2.0  # one second from --start 1
     assert 1.0 <= times[1] < times[0]  # the next reached --end 3 and went back to 1
     assert times[1] < times[2] <= 2.0  # and it goes on from there
+
+
+def test_echo_decodes_the_protobuf_viewer_channels(recorded, capsys):
+    """``afa log echo`` of a protobuf point cloud or grid: its fields by name, the data in
+    base64, the same points as the recorded stereo event's (decision 0038)."""
+    import base64
+
+    import numpy as np
+
+    assert main(["log", "echo", str(recorded), "/viz/Stereo", "--json"]) == 0
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert lines and all(line["topic"] == "/viz/Stereo" for line in lines)
+    cloud = lines[0]["body"]
+    assert cloud["point_stride"] == 12 and cloud["frame_id"]
+    assert [(f["name"], f["offset"], f["type"]) for f in cloud["fields"]] == [
+        ("x", 0, 7), ("y", 4, 7), ("z", 8, 7)]
+    assert cloud["pose"]["orientation"]["w"] == 1.0
+    points = np.frombuffer(base64.b64decode(cloud["data"]), "<f4").reshape(-1, 3)
+    with LogReader(recorded) as reader:
+        [stereo] = [c for c in reader.topics(fmt.EVENT) if c.topic == "/Raptor/Stereo"]
+        event = reader.decode_event(next(reader.messages(channels=[stereo.id])))
+    assert (cloud["timestamp"]["seconds"], cloud["timestamp"]["nanos"]) == (
+        event.body.time.sec, event.body.time.usec * 1000)
+    assert np.array_equal(points, np.asarray(event.body.points, "<f4"))
+    assert main(["log", "echo", str(recorded), "/viz/Terrain"]) == 0
+    assert "column_count" in capsys.readouterr().out

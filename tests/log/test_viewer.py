@@ -1,5 +1,7 @@
 """Viewer channels: Foxglove schemas, exactly named, with the fields Foxglove documents,
-from synthetic map, vote, pose and point bodies."""
+from synthetic map, vote, pose and point bodies. Point clouds and grids are written as
+protobuf: they are decoded here by the ``protobuf`` package from the descriptor set the
+recording carries, an independent decoder."""
 
 import base64
 import json
@@ -8,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from afa.log import LogReader
+from afa.log import LogReader, protobuf
 from afa.log import format as fmt
-from afa.log.viewer import SCHEMAS, ViewerConverter, quaternion
+from afa.log.viewer import ENCODINGS, SCHEMAS, ViewerConverter, quaternion
 from idl import (
     ArcVoteIDL,
     MapArrayEventIDL,
@@ -51,6 +53,46 @@ def conforms(value, schema, where="$"):
             base64.b64decode(value, validate=True)
     elif kind == "boolean":
         assert isinstance(value, bool), where
+
+
+def message_class(name, descriptor_set):
+    """The protobuf package's message class of ``name`` built from a FileDescriptorSet."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    pool = descriptor_pool.DescriptorPool()
+    for file in descriptor_pb2.FileDescriptorSet.FromString(descriptor_set).file:
+        pool.Add(file)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+
+
+def decoded(name, data, descriptor_set=None):
+    """A protobuf ``foxglove.PointCloud`` or ``foxglove.Grid`` (bytes, or the parts the
+    converter gives) decoded by the protobuf package, as the JSON document ``convert``
+    builds (data in base64)."""
+    if isinstance(data, list):
+        data = b"".join(bytes(part) for part in data)
+    cls = message_class(name, descriptor_set or protobuf.SCHEMAS[name])
+    message = cls.FromString(data)
+    assert message.SerializeToString() == data  # nothing unknown, canonical order
+
+    def vector(v, axes):
+        return {axis: getattr(v, axis) for axis in axes}
+
+    document = {"timestamp": {"sec": message.timestamp.seconds,
+                              "nsec": message.timestamp.nanos},
+                "frame_id": message.frame_id,
+                "pose": {"position": vector(message.pose.position, "xyz"),
+                         "orientation": vector(message.pose.orientation, "xyzw")}}
+    if name == "foxglove.PointCloud":
+        document["point_stride"] = message.point_stride
+    else:
+        document.update(column_count=message.column_count,
+                        cell_size=vector(message.cell_size, "xy"),
+                        row_stride=message.row_stride, cell_stride=message.cell_stride)
+    document["fields"] = [{"name": f.name, "offset": f.offset, "type": f.type}
+                          for f in message.fields]
+    document["data"] = base64.b64encode(message.data).decode("ascii")
+    return document
 
 
 def header(rows=4, cols=3):
@@ -155,11 +197,32 @@ def test_a_recorded_simulation_has_viewer_channels_with_foxglove_schema_names(re
         assert viewer["/viz/tf"].schema == "foxglove.FrameTransform"
         assert viewer["/viz/Laser11"].schema == viewer["/viz/Stereo"].schema == \
             "foxglove.PointCloud"
-        assert all(c.encoding == "json" for c in viewer.values())
+        assert viewer["/viz/Terrain"].schema == "foxglove.Grid"
+        assert all(c.encoding == ENCODINGS.get(c.schema, "json") for c in viewer.values())
+        assert {c.encoding for c in viewer.values()} == {"json", "protobuf"}
         frames = set()
-        import json
         for message in reader.messages(channels=[viewer["/viz/tf"].id]):
             frames.add(json.loads(message.data)["child_frame_id"])
+        # the clouds and grids decode with the descriptor set the file carries, and
+        # hold the points and cells of the recorded events
+        schemas = {name: (encoding, data) for name, encoding, data in reader.schemas.values()}
+        events = {c.topic: c for c in reader.topics(fmt.EVENT)}
+        for topic, event_topic in (("/viz/Stereo", "/Raptor/Stereo"),
+                                   ("/viz/Terrain", "/Raptor/Terrain")):
+            channel = viewer[topic]
+            encoding, descriptor_set = schemas[channel.schema]
+            assert encoding == "protobuf"
+            drawn = [decoded(channel.schema, m.data, descriptor_set)
+                     for m in reader.messages(channels=[channel.id])]
+            recorded_events = [reader.decode_event(m) for m in
+                               reader.messages(channels=[events[event_topic].id])]
+            assert drawn and recorded_events
+            first = drawn[0]
+            body = next(e.body for e in recorded_events
+                        if e.body.time.sec == first["timestamp"]["sec"]
+                        and e.body.time.usec * 1000 == first["timestamp"]["nsec"])
+            [(_, _, expected)] = ViewerConverter().convert(event_topic[8:], "x", body)
+            assert first == expected
     assert {"FrontNoddingSICKLeft:AxleCenterFreeEnd", "Digiclops:ImagePlane"} <= frames
 
 
@@ -209,10 +272,10 @@ def test_votes_and_maps_are_drawn_at_display_rates_poses_at_every_stamp():
     assert converter.encode("ArcVote", "PurePursuit", vote(100.1, "PurePursuit"))
 
 
-def test_what_the_recorder_writes_is_the_converted_document_byte_for_byte():
-    """``encode`` writes point clouds and maps without json.dumps of the base64 text:
-    its bytes must be exactly ``json.dumps`` of what ``convert`` builds (compact), for
-    every point-cloud form and every map type, NaN cells and points included."""
+def test_what_the_recorder_writes_is_the_converted_document():
+    """``encode`` writes point clouds and maps as protobuf: decoded by the protobuf
+    package they must be exactly what ``convert`` builds, for every point-cloud form and
+    every map type, NaN cells and points included."""
     rng = np.random.default_rng(4)
     beams = rng.normal(size=(7, 3))
     valid = np.array([True, False, True, True, False, True, True])
@@ -259,11 +322,16 @@ def test_what_the_recorder_writes_is_the_converted_document_byte_for_byte():
         assert len(converted) == len(encoded) == 1, event_type
         [(topic, schema, message)], [(topic2, schema2, data)] = converted, encoded
         assert (topic, schema) == (topic2, schema2)
-        assert data == json.dumps(message, separators=(",", ":"), allow_nan=False).encode()
-        conforms(json.loads(data), SCHEMAS[schema])
+        assert ENCODINGS[schema] == "protobuf"
+        document = decoded(schema, data)
+        # NaN cells and points: compare their bytes, then the rest as values
+        assert document.pop("data") == message["data"]
+        assert document == {k: v for k, v in message.items() if k != "data"}, event_type
+        conforms(message, SCHEMAS[schema])
     # the drawn points of a static form are its valid ones, NaN-free
     [(_, _, data)] = ViewerConverter().encode("Stereo", "stereo", bodies[2][2])
-    drawn = np.frombuffer(base64.b64decode(json.loads(data)["data"]), "<f4").reshape(-1, 3)
+    drawn = np.frombuffer(base64.b64decode(decoded("foxglove.PointCloud", data)["data"]),
+                          "<f4").reshape(-1, 3)
     assert np.array_equal(drawn, pixels[seen])
     # a sensor whose sequence form is drawn is not drawn again from its static form
     converter = ViewerConverter()
@@ -315,3 +383,130 @@ def test_poses_are_written_byte_for_byte_as_converted_and_their_quaternions_turn
         diagonal = np.diag(rotation)
         branches.add("trace" if diagonal.sum() > 0 else int(np.argmax(diagonal)))
     assert branches == {"trace", 0, 1, 2}
+
+
+#: Foxglove's documented protobuf schemas (foxglove/schemas, schemas/proto/foxglove/
+#: PointCloud.proto, Grid.proto, PackedElementField.proto, Pose.proto, Vector2.proto,
+#: Vector3.proto, Quaternion.proto; google/protobuf/timestamp.proto): message ->
+#: [(field, number, type, message or enum type, repeated)].
+FOXGLOVE = {
+    "foxglove.PointCloud": [
+        ("timestamp", 1, "MESSAGE", "google.protobuf.Timestamp", False),
+        ("frame_id", 2, "STRING", "", False), ("pose", 3, "MESSAGE", "foxglove.Pose", False),
+        ("point_stride", 4, "FIXED32", "", False),
+        ("fields", 5, "MESSAGE", "foxglove.PackedElementField", True),
+        ("data", 6, "BYTES", "", False)],
+    "foxglove.Grid": [
+        ("timestamp", 1, "MESSAGE", "google.protobuf.Timestamp", False),
+        ("frame_id", 2, "STRING", "", False), ("pose", 3, "MESSAGE", "foxglove.Pose", False),
+        ("column_count", 4, "FIXED32", "", False),
+        ("cell_size", 5, "MESSAGE", "foxglove.Vector2", False),
+        ("row_stride", 6, "FIXED32", "", False), ("cell_stride", 7, "FIXED32", "", False),
+        ("fields", 8, "MESSAGE", "foxglove.PackedElementField", True),
+        ("data", 9, "BYTES", "", False)],
+    "foxglove.PackedElementField": [
+        ("name", 1, "STRING", "", False), ("offset", 2, "FIXED32", "", False),
+        ("type", 3, "ENUM", "foxglove.PackedElementField.NumericType", False)],
+    "foxglove.Pose": [("position", 1, "MESSAGE", "foxglove.Vector3", False),
+                      ("orientation", 2, "MESSAGE", "foxglove.Quaternion", False)],
+    "foxglove.Vector2": [(a, k + 1, "DOUBLE", "", False) for k, a in enumerate("xy")],
+    "foxglove.Vector3": [(a, k + 1, "DOUBLE", "", False) for k, a in enumerate("xyz")],
+    "foxglove.Quaternion": [(a, k + 1, "DOUBLE", "", False) for k, a in enumerate("xyzw")],
+    "google.protobuf.Timestamp": [("seconds", 1, "INT64", "", False),
+                                  ("nanos", 2, "INT32", "", False)],
+}
+
+
+def _repeated(field):
+    """Whether a protobuf field is repeated (``is_repeated`` since protobuf 6, ``label``
+    before)."""
+    repeated = getattr(field, "is_repeated", None)
+    return field.label == field.LABEL_REPEATED if repeated is None else repeated
+
+
+def test_the_protobuf_schemas_are_foxglove_s_field_for_field():
+    from google.protobuf.descriptor import FieldDescriptor
+
+    types = {name[5:]: value for name, value in vars(FieldDescriptor).items()
+             if name.startswith("TYPE_")}
+    for root in ("foxglove.PointCloud", "foxglove.Grid"):
+        cls = message_class(root, protobuf.SCHEMAS[root])
+        pool = cls.DESCRIPTOR.file.pool
+        seen = set()
+        pending = [root]
+        while pending:
+            name = pending.pop()
+            seen.add(name)
+            descriptor = pool.FindMessageTypeByName(name)
+            got = []
+            for f in descriptor.fields:
+                target = f.message_type or f.enum_type
+                got.append((f.name, f.number, f.type, target.full_name if target else "",
+                            _repeated(f)))
+                if f.message_type is not None and f.message_type.full_name not in seen:
+                    pending.append(f.message_type.full_name)
+            assert got == [(n, k, types[t], target, repeated)
+                           for n, k, t, target, repeated in FOXGLOVE[name]], name
+        assert seen == ({"foxglove.PointCloud"} if root.endswith("Cloud") else
+                        {"foxglove.Grid", "foxglove.Vector2"}) | {
+            "foxglove.Pose", "foxglove.Vector3", "foxglove.Quaternion",
+            "foxglove.PackedElementField", "google.protobuf.Timestamp"}
+        numeric = pool.FindEnumTypeByName("foxglove.PackedElementField.NumericType")
+        assert [(v.name, v.number) for v in numeric.values] == list(zip(
+            ["UNKNOWN", "UINT8", "INT8", "UINT16", "INT16", "UINT32", "INT32", "FLOAT32",
+             "FLOAT64"], range(9), strict=True))
+
+
+def test_protobuf_values_at_their_limits_decode_as_written():
+    """Varints of every length, negative and signed-zero doubles, empty data."""
+    cls = message_class("foxglove.PointCloud", protobuf.SCHEMAS["foxglove.PointCloud"])
+    for seconds, nanos in ((0, 0), (1, 1), (127, 128), (16383, 16384), (2**31, 999_999_999),
+                           (2**63 - 1, 5)):
+        origin = protobuf.pose((-0.0, -1.5e-300, 2.0**70), (0.0, -0.0, 1e308, -1.0))
+        parts = protobuf.point_cloud(seconds, nanos, "frame \u00e9",
+                                     protobuf.byte_view(np.zeros((0, 3), "<f4")),
+                                     origin=origin, stride=2**32 - 1,
+                                     fields=(("x", 2**32 - 1, 8), ("", 0, 0)))
+        message = cls.FromString(b"".join(bytes(p) for p in parts))
+        assert (message.timestamp.seconds, message.timestamp.nanos) == (seconds, nanos)
+        assert message.frame_id == "frame \u00e9" and message.point_stride == 2**32 - 1
+        position, orientation = message.pose.position, message.pose.orientation
+        assert (position.x, position.y, position.z) == (0.0, -1.5e-300, 2.0**70)
+        assert math.copysign(1.0, position.x) == -1.0  # -0.0 kept
+        assert (orientation.x, orientation.y, orientation.z, orientation.w) == \
+            (0.0, 0.0, 1e308, -1.0)
+        assert math.copysign(1.0, orientation.y) == -1.0
+        assert [(f.name, f.offset, f.type) for f in message.fields] == \
+            [("x", 2**32 - 1, 8), ("", 0, 0)]
+        assert message.data == b""
+
+
+def _as_dict(message):
+    """Every field of a protobuf package message, bytes in base64 (what Decoder gives)."""
+    out = {}
+    for field in message.DESCRIPTOR.fields:
+        value = getattr(message, field.name)
+        if field.message_type is not None:
+            value = [_as_dict(v) for v in value] if _repeated(field) else _as_dict(value)
+        elif isinstance(value, bytes):
+            value = base64.b64encode(value).decode("ascii")
+        out[field.name] = value
+    return out
+
+
+def test_the_echo_tool_s_decoder_reads_what_the_protobuf_package_reads():
+    rng = np.random.default_rng(2)
+    points = rng.normal(size=(50, 3)).astype(np.float32)
+    scan = Range3dSeqEventIDL(time=TimeIDL(sec=7, usec=5), sensorId=11, frame="L:F",
+                              points=points)
+    cells = rng.random((6, 5)).astype(np.float32)
+    fields = header(rows=6, cols=5)
+    travel = TravMapArrayEventIDL(**fields, hazard=cells, goodness=1 - cells,
+                                  vehiclePosition=Position3DIDL())
+    for event_type, body in (("Laser11", scan), ("Traverse", travel)):
+        [(_, schema, parts)] = ViewerConverter().encode(event_type, "x", body)
+        data = b"".join(bytes(p) for p in parts)
+        expected = _as_dict(message_class(schema, protobuf.SCHEMAS[schema]).FromString(data))
+        assert protobuf.Decoder(protobuf.SCHEMAS[schema]).decode(schema, data) == expected
+    with pytest.raises(ValueError):
+        protobuf.Decoder(protobuf.SCHEMAS[schema]).decode(schema, data[:-3])

@@ -1,5 +1,7 @@
 """afa's MCAP writer against the ``mcap`` package's own readers: what it writes is read
-back whole, in order, with every CRC checked, through the index and by a linear scan."""
+back whole, in order, with every CRC checked, through the index and by a linear scan.
+A compressed chunk's CRC is 0 ("not computed"): its zstd or lz4 frame's checksum of the
+same records stands for it, and the decompressors check it."""
 
 import io
 import struct
@@ -120,11 +122,23 @@ def test_the_mcap_readers_read_back_every_message_with_crcs_checked(compression)
     for record in records:
         if isinstance(record, Chunk):
             if record.compression == "zstd":
+                assert zstandard.get_frame_parameters(record.data).has_checksum
                 content = zstandard.decompress(record.data, record.uncompressed_size)
+                damaged = bytearray(record.data)
+                damaged[-1] ^= 1  # the frame's checksum itself
+                with pytest.raises(zstandard.ZstdError, match="checksum"):
+                    zstandard.decompress(bytes(damaged), record.uncompressed_size)
             elif record.compression == "lz4":
                 content = lz4.frame.decompress(record.data)
+                damaged = bytearray(record.data)
+                damaged[-1] ^= 1
+                with pytest.raises(RuntimeError, match="(?i)checksum"):
+                    lz4.frame.decompress(bytes(damaged))
             else:
                 content = bytes(record.data)
+            # a compressed chunk's records are covered by their frame's checksum
+            assert record.uncompressed_crc == (0 if record.compression
+                                               else zlib.crc32(content))
         elif isinstance(record, MessageIndex):
             for log_time, offset in record.records:
                 opcode, _, channel_id, _, at = struct.unpack_from("<BQHIQ", content, offset)
