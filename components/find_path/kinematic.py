@@ -41,8 +41,11 @@ merged by cell and heading bin):
 The search is confined to a window around start and target and stops after
 ``max_expansions`` states: it answers ``None`` then, and FindPath tracks the D* path as
 before. A typical query expands a few dozen states in the open and a few thousand where it
-must swing wide. The search loop is compiled (``_search_jit.py``, decision 0028); the
-Python loop in :meth:`Refiner.plan` is its oracle and fallback.
+must swing wide: round the end of a wall, 3,500–5,000 (the budget was 3,000 until
+decision 0039; every search that failed there failed for the budget, and the vehicle
+backed out and came back to the same place six times). The search loop is compiled
+(``_search_jit.py``, decision 0028); the Python loop in :meth:`Refiner.plan` is its
+oracle and fallback.
 """
 
 from __future__ import annotations
@@ -98,7 +101,7 @@ class Refiner:
     def __init__(self, max_curvature: float, offsets: tuple[float, ...], radius: float,
                  *, hazard_margin: float = 0.0, resolution: float = 0.1,
                  slack: float = 0.1, motions: int = 7, step: float = 0.75, heading_bins: int = 72,
-                 max_expansions: int = 3000, window_margin: float | None = None,
+                 max_expansions: int = 12000, window_margin: float | None = None,
                  position_tolerance: float = 0.75, heading_tolerance: float = 0.35,
                  curvature_change_cost: float = 0.5, heuristic_weight: float = 1.0,
                  escape_rate: float = 0.25) -> None:
