@@ -31,11 +31,13 @@ import functools
 import struct
 from typing import Any, TypeVar
 
+import numpy as np
 from pydantic import ValidationError
 
 from idl._base import WIRE_BUFFERS, IDLModel, idl_types, type_name
 
-__all__ = ["encode", "encode_parts", "decode", "peek_type", "schema", "WireError", "MAGIC"]
+__all__ = ["encode", "encode_parts", "byte_view", "decode", "peek_type", "schema",
+           "WireError", "MAGIC"]
 
 MAGIC = b"AFW1"
 _U16 = struct.Struct("<H")
@@ -72,11 +74,15 @@ def encode_parts(model: IDLModel) -> list[bytes | memoryview]:
         pad = -offset % 8
         if pad:
             parts.append(_PADDING[pad])
-        nbytes = array.nbytes
-        # an empty array (a scan with no return) has no bytes
-        parts.append(memoryview(array).cast("B") if nbytes else _EMPTY)
-        offset += pad + nbytes
+        parts.append(byte_view(array))
+        offset += pad + array.nbytes
     return parts
+
+
+def byte_view(array: np.ndarray) -> memoryview:
+    """A C-contiguous array's bytes as a flat byte view, not copied (an empty array, a
+    scan with no return, has no buffer to view)."""
+    return memoryview(array).cast("B") if array.nbytes else _EMPTY
 
 
 #: Each class's encoded type name (classes are never renamed once defined).

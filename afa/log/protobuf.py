@@ -24,10 +24,8 @@ import math
 import struct
 from collections.abc import Sequence
 
-import numpy as np
-
 __all__ = ["SCHEMAS", "ENCODING", "FLOAT32", "XYZ", "IDENTITY", "point_cloud", "grid", "pose",
-           "timestamp", "byte_view", "Decoder"]
+           "Decoder"]
 
 #: The message and schema encoding of these channels (MCAP's well-known name).
 ENCODING = "protobuf"
@@ -80,11 +78,6 @@ def _double(field: int, value: float) -> bytes:
 
 # -- the messages --------------------------------------------------------------------------
 
-def timestamp(seconds: int, nanos: int) -> bytes:
-    """``google.protobuf.Timestamp``."""
-    return _uint(1, seconds) + _uint(2, nanos)
-
-
 def pose(position: Sequence[float], orientation: Sequence[float]) -> bytes:
     """``foxglove.Pose``: a position (x, y, z) and a quaternion (x, y, z, w)."""
     vector = b"".join(_double(k + 1, float(v)) for k, v in enumerate(position))
@@ -120,14 +113,9 @@ def point_cloud(seconds: int, nanos: int, frame: str, data: memoryview, *,
     into the chunk). ``origin``: an encoded :func:`pose`; ``fields``: (name, offset,
     numeric type) of each field of a point. A laser's scan line comes every 12 ms: what
     does not change between two clouds of a sensor is encoded once (cached)."""
-    size = data.nbytes
-    if not size:
-        return [_timestamp_field(seconds, nanos) + _cloud_middle(frame, origin, stride, fields)]
-    return [_timestamp_field(seconds, nanos) + _cloud_middle(frame, origin, stride, fields)
-            + _DATA6 + _varint(size), data]
-
-
-_DATA6 = bytes((6 << 3 | _LEN,))  # the key of PointCloud.data
+    head = (_timestamp_field(seconds, nanos) + _cloud_middle(frame, origin, stride, fields)
+            + _data_head(6, data.nbytes))
+    return [head, data] if data.nbytes else [head]
 
 
 def _timestamp_field(seconds: int, nanos: int) -> bytes:
@@ -161,13 +149,6 @@ def grid(seconds: int, nanos: int, frame: str, origin: bytes, columns: int,
                      _fixed32(6, cell_stride * columns), _fixed32(7, cell_stride),
                      _fields(8, fields), _data_head(9, data.nbytes)))
     return [head, data] if data.nbytes else [head]
-
-
-def byte_view(array: np.ndarray) -> memoryview:
-    """A C-contiguous array's bytes as a flat byte view (no copy)."""
-    if array.size:
-        return array.data.cast("B")
-    return memoryview(b"")
 
 
 # -- the schemas: google.protobuf.FileDescriptorSet ------------------------------------------

@@ -58,6 +58,7 @@ from idl import (
     Range3dStereoEventIDL,
     TimeIDL,
     TravMapArrayEventIDL,
+    wire,
 )
 from idl._base import IDLModel
 
@@ -321,7 +322,7 @@ def point_cloud_protobuf(stamp: TimeIDL, frame: str, points: np.ndarray
     the viewer channel written most (a laser scan line every 12 ms, a stereo frame of
     ~30 000 points)."""
     data = np.ascontiguousarray(points, dtype="<f4")
-    return protobuf.point_cloud(*_stamp(stamp), frame, protobuf.byte_view(data))
+    return protobuf.point_cloud(*_stamp(stamp), frame, wire.byte_view(data))
 
 
 def grid_protobuf(body: Any, layers: Iterable[str]) -> list[bytes | memoryview]:
@@ -338,7 +339,7 @@ def grid_protobuf(body: Any, layers: Iterable[str]) -> list[bytes | memoryview]:
     size = float(body.gridsize)
     return protobuf.grid(*_stamp(body.time), WORLD_FRAME, origin, int(body.rows),
                          (size, size), 4 * len(names), _layer_fields(names),
-                         protobuf.byte_view(stack))
+                         wire.byte_view(stack))
 
 
 @functools.lru_cache(maxsize=32)

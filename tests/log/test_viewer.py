@@ -23,6 +23,7 @@ from idl import (
     Range3dSeqEventIDL,
     TimeIDL,
     TravMapArrayEventIDL,
+    wire,
 )
 
 
@@ -464,7 +465,7 @@ def test_protobuf_values_at_their_limits_decode_as_written():
                            (2**63 - 1, 5)):
         origin = protobuf.pose((-0.0, -1.5e-300, 2.0**70), (0.0, -0.0, 1e308, -1.0))
         parts = protobuf.point_cloud(seconds, nanos, "frame \u00e9",
-                                     protobuf.byte_view(np.zeros((0, 3), "<f4")),
+                                     wire.byte_view(np.zeros((0, 3), "<f4")),
                                      origin=origin, stride=2**32 - 1,
                                      fields=(("x", 2**32 - 1, 8), ("", 0, 0)))
         message = cls.FromString(b"".join(bytes(p) for p in parts))
