@@ -82,7 +82,7 @@ def encode_parts(model: IDLModel) -> list[bytes | memoryview]:
 def byte_view(array: np.ndarray) -> memoryview:
     """A C-contiguous array's bytes as a flat byte view, not copied (an empty array, a
     scan with no return, has no buffer to view)."""
-    return memoryview(array).cast("B") if array.nbytes else _EMPTY
+    return array.data.cast("B") if array.nbytes else _EMPTY
 
 
 #: Each class's encoded type name (classes are never renamed once defined).
