@@ -183,7 +183,8 @@ def schema_of(name: str) -> tuple[str, bytes]:
 
 def _time(stamp: TimeIDL | float) -> dict[str, int]:
     if isinstance(stamp, TimeIDL):
-        return {"sec": max(0, stamp.sec), "nsec": stamp.usec * 1000}
+        sec, nsec = _stamp(stamp)
+        return {"sec": sec, "nsec": nsec}
     nanoseconds = max(0, round(stamp * 1e9))
     return {"sec": nanoseconds // 1_000_000_000, "nsec": nanoseconds % 1_000_000_000}
 
@@ -288,13 +289,10 @@ def grid(body: Any, layers: Iterable[str]) -> dict[str, Any]:
     Foxglove grid is row-major with rows along y, so its data is the layers transposed.
     """
     names = list(layers)
-    stack = np.stack([np.asarray(getattr(body, n), dtype="<f4").T for n in names], axis=-1)
-    data = base64.b64encode(np.ascontiguousarray(stack).data).decode("ascii")
-    corner = np.eye(4)
-    corner[0, 3], corner[1, 3] = body.originX, body.originY
-    pose = np.asarray(body.mapPose) @ corner
+    data = base64.b64encode(_grid_cells(body, names).data).decode("ascii")
     cell = 4 * len(names)
-    return {"timestamp": _time(body.time), "frame_id": WORLD_FRAME, "pose": _pose(pose),
+    return {"timestamp": _time(body.time), "frame_id": WORLD_FRAME,
+            "pose": _pose(_grid_origin(body)),
             "column_count": int(body.rows), "cell_size": {"x": float(body.gridsize),
                                                          "y": float(body.gridsize)},
             "row_stride": cell * int(body.rows), "cell_stride": cell,
@@ -303,15 +301,33 @@ def grid(body: Any, layers: Iterable[str]) -> dict[str, Any]:
             "data": data}
 
 
+def _grid_cells(body: Any, names: Iterable[str]) -> np.ndarray:
+    """A map's layers as a Foxglove grid's cells: rows along y (the layers transposed),
+    each cell the layers' float32 values, C-contiguous."""
+    cells = [np.asarray(getattr(body, name)).T for name in names]
+    stack = np.empty((*cells[0].shape, len(cells)), dtype="<f4")
+    for k, layer in enumerate(cells):
+        stack[..., k] = layer  # one strided copy per layer, no intermediate float32 arrays
+    return stack
+
+
+def _grid_origin(body: Any) -> np.ndarray:
+    """^W T of a map's corner cell (the grid's pose): the map's pose at its origin."""
+    corner = np.eye(4)
+    corner[0, 3], corner[1, 3] = body.originX, body.originY
+    return np.asarray(body.mapPose) @ corner
+
+
 def _time_json(stamp: TimeIDL | float) -> str:
     """``_compact(_time(stamp))``."""
     if isinstance(stamp, TimeIDL):
-        return f'{{"sec":{max(0, int(stamp.sec))},"nsec":{int(stamp.usec) * 1000}}}'
+        sec, nsec = _stamp(stamp)
+        return f'{{"sec":{sec},"nsec":{nsec}}}'
     return _compact(_time(stamp))
 
 
 def _stamp(stamp: TimeIDL) -> tuple[int, int]:
-    """``_time(stamp)`` as (seconds, nanoseconds)."""
+    """A time stamp as a Foxglove time's (seconds, nanoseconds), 0 s at the earliest."""
     return max(0, int(stamp.sec)), int(stamp.usec) * 1000
 
 
@@ -328,18 +344,12 @@ def point_cloud_protobuf(stamp: TimeIDL, frame: str, points: np.ndarray
 def grid_protobuf(body: Any, layers: Iterable[str]) -> list[bytes | memoryview]:
     """:func:`grid` as protobuf (:mod:`afa.log.protobuf`), the parts of its bytes."""
     names = tuple(layers)
-    cells = [np.asarray(getattr(body, name)).T for name in names]
-    stack = np.empty((*cells[0].shape, len(cells)), dtype="<f4")
-    for k, layer in enumerate(cells):
-        stack[..., k] = layer  # one strided copy per layer, no intermediate float32 arrays
-    corner = np.eye(4)
-    corner[0, 3], corner[1, 3] = body.originX, body.originY
-    rows = (np.asarray(body.mapPose) @ corner).tolist()
+    rows = _grid_origin(body).tolist()
     origin = protobuf.pose((rows[0][3], rows[1][3], rows[2][3]), _quaternion(rows))
     size = float(body.gridsize)
     return protobuf.grid(*_stamp(body.time), WORLD_FRAME, origin, int(body.rows),
                          (size, size), 4 * len(names), _layer_fields(names),
-                         wire.byte_view(stack))
+                         wire.byte_view(_grid_cells(body, names)))
 
 
 @functools.lru_cache(maxsize=32)
