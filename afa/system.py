@@ -96,12 +96,13 @@ class Observer:
             except asyncio.CancelledError:
                 if cancel_requested():
                     raise  # the system is stopping
-                self._failed(event, "raised CancelledError without being cancelled")
+                self.failed(event, "raised CancelledError without being cancelled")
             except Exception as exc:
-                self._failed(event, exc)
+                self.failed(event, exc)
 
-    def _failed(self, event: Event, error: BaseException | str) -> None:
-        """One event the callback failed on: counted; the first three logged."""
+    def failed(self, event: Event, error: BaseException | str) -> None:
+        """One event the callback failed on: counted; the first three logged (also for a
+        callback that records events queued behind its own, as the recorder does)."""
         self.errors += 1
         if self.errors <= 3:
             log.error("observer %s failed on %s (event dropped): %s", self.name, event.type,

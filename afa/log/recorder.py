@@ -234,10 +234,8 @@ class Recorder:
         while (event := get()) is not None:
             try:
                 on_event(event)
-            except Exception:
-                self._observer.errors += 1
-                if self._observer.errors <= 3:
-                    log.exception("recorder failed on %s (event dropped)", event.type)
+            except Exception as exc:
+                self._observer.failed(event, exc)
 
     async def _on_batch(self, event: Event) -> None:
         """The observer's callback: records ``event`` and everything queued behind it,
