@@ -247,7 +247,7 @@ class Array:
 
     def _serialize(self, value: np.ndarray, info: Any) -> Any:
         context = info.context
-        if type(context) is dict:  # the wire codec's context first: it is the hot path
+        if isinstance(context, dict):  # the wire codec's context first: it is the hot path
             wire_buffers = context.get(WIRE_BUFFERS)
             if wire_buffers is not None and info.mode == "json":
                 contiguous = np.ascontiguousarray(value)
@@ -259,14 +259,8 @@ class Array:
         if context is _FINGERPRINT:
             return _fingerprint_head(value)
         contiguous = np.ascontiguousarray(value)
-        head: dict[str, Any] = {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape)}
-        if isinstance(context, dict) and WIRE_BUFFERS in context:
-            buffers: list[np.ndarray] = context[WIRE_BUFFERS]
-            head["$array"] = len(buffers)
-            buffers.append(contiguous)
-        else:
-            head["data"] = base64.b64encode(contiguous.tobytes()).decode("ascii")
-        return head
+        return {"dtype": contiguous.dtype.str, "shape": list(contiguous.shape),
+                "data": base64.b64encode(contiguous.tobytes()).decode("ascii")}
 
 
 #: The fingerprint heads of recent frozen arrays, by identity (see :func:`_fingerprint_head`).
