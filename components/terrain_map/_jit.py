@@ -19,17 +19,21 @@ __all__ = ["fuse_kernel"]
 _F64 = numba.float64[::1]
 SIGNATURE = numba.types.UniTuple(numba.int64, 2)(
     numba.float64[:, ::1], numba.float64, numba.float64, numba.float64, numba.int64,
-    numba.int64, numba.float64, numba.boolean, numba.int64[::1], _F64, _F64, _F64, _F64, _F64)
+    numba.int64, numba.float64, numba.boolean, numba.float64, numba.int64[::1], _F64, _F64,
+    _F64, _F64, _F64, _F64, _F64, _F64)
 
 
 @numba.njit(SIGNATURE, cache=True, nogil=True, fastmath=False, error_model="numpy",
             boundscheck=False)
 def fuse_kernel(p: np.ndarray, origin_x: float, origin_y: float, gridsize: float, rows: int,
-                cols: int, time: float, assign: bool, count: np.ndarray, sum_z: np.ndarray,
-                sum_z2: np.ndarray, min_z: np.ndarray, max_z: np.ndarray,
-                last_seen: np.ndarray) -> tuple[int, int]:
+                cols: int, time: float, assign: bool, window: float, count: np.ndarray,
+                sum_z: np.ndarray, sum_z2: np.ndarray, min_z: np.ndarray, max_z: np.ndarray,
+                last_seen: np.ndarray, gen_min: np.ndarray, gen_max: np.ndarray,
+                gen_start: np.ndarray) -> tuple[int, int]:
     """Fuse the points ``p`` (n, 3) seen at ``time``; ``assign``: every stored time is
-    older (set ``last_seen``, else keep the newer). Returns (fused, nonfinite)."""
+    older (set ``last_seen``, else keep the newer); ``window``: the generations' length
+    (a new one opens at a point ``window`` or more after the current one's start).
+    Returns (fused, nonfinite)."""
     fused = 0
     nonfinite = 0
     for k in range(p.shape[0]):
@@ -42,7 +46,17 @@ def fuse_kernel(p: np.ndarray, origin_x: float, origin_y: float, gridsize: float
             count[cell] += 1
             sum_z[cell] += z
             sum_z2[cell] += z * z
-            low = min_z[cell]  # np.minimum(a, b) is b unless a < b (ties: b)
+            if time - gen_start[cell] >= window:  # a new generation: drop the one before
+                min_z[cell] = gen_min[cell]
+                max_z[cell] = gen_max[cell]
+                gen_min[cell] = math.inf
+                gen_max[cell] = -math.inf
+                gen_start[cell] = time
+            low = gen_min[cell]  # np.minimum(a, b) is b unless a < b (ties: b)
+            gen_min[cell] = low if low < z else z
+            high = gen_max[cell]
+            gen_max[cell] = high if high > z else z
+            low = min_z[cell]
             min_z[cell] = low if low < z else z
             high = max_z[cell]
             max_z[cell] = high if high > z else z

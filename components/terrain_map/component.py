@@ -33,7 +33,10 @@
   distance rolled along that axis, and pulled towards the GPS's with 10 s horizontally.
 - The *global* map (``Depth`` × ``Width`` at ``Gridsize``, frame ``World``: metres from
   ``initialUTM``, north up) scrolls with the vehicle, centred on the ground frame (the
-  front bumper), so the ego view ahead stays inside it. The *ego* map
+  front bumper), so the ego view ahead stays inside it. A cell's min and max heights
+  cover its latest ``EXTREMES_WINDOW`` to twice that seconds of observation (the grid's
+  generations, decision 0040): the placement's error wanders, and over minutes of
+  watching one cell its extremes would grow into a step. The *ego* map
   (``EgoDepth`` × ``EgoWidth`` ahead of the bumper, heading-aligned, ground
   ``BumperHeight`` below the bumper) is a view of it at each publication.
 - Publication: every ``MapEventInterval`` seconds once ``MapUpdateTime`` has passed since
@@ -85,13 +88,16 @@ from idl import (
     WheelDataIDL,
 )
 
-__all__ = ["TerrainMap", "VEHICLE_FRAME", "PENDING_LIMIT", "POSE_BUFFER"]
+__all__ = ["TerrainMap", "VEHICLE_FRAME", "PENDING_LIMIT", "POSE_BUFFER", "EXTREMES_WINDOW"]
 
 VEHICLE_FRAME = "Raptor:RearAxleCenter"
 #: A scan newer than the newest pose waits this long (s) for the pose that follows it.
 PENDING_LIMIT = 0.5
 #: Poses kept for placing scans (ModelServer publishes ~14 a second: ~18 s).
 POSE_BUFFER = 256
+#: The length (s) of a cell's generations (:class:`TerrainGrid`): its min and max heights
+#: cover its latest 30 to 60 s of observation.
+EXTREMES_WINDOW = 30.0
 _LASER = (Range3dSeqEventIDL, Range3dLaserIDL)
 _STEREO = (Range3dArrayEventIDL, Range3dStereoEventIDL)
 _RangeEvent = Range3dSeqEventIDL | Range3dLaserIDL | Range3dArrayEventIDL | Range3dStereoEventIDL
@@ -127,7 +133,8 @@ class TerrainMap(SubscribePublishServer[TerrainMapParameters]):
         self.serves(Map, p.EventName)
         self.platform = self.uses(Platform, p.PlatformEvent)
         g = p.Gridsize / 1000.0
-        self.grid = TerrainGrid.centred(0.0, 0.0, p.Depth / 1000.0, p.Width / 1000.0, g)
+        self.grid = TerrainGrid.centred(0.0, 0.0, p.Depth / 1000.0, p.Width / 1000.0, g,
+                                        window=EXTREMES_WINDOW)
         self.ego = EgoView.ahead(p.EgoDepth / 1000.0, p.EgoWidth / 1000.0, g)
         self.poses = PoseBuffer(POSE_BUFFER, PoseAudit.from_parameters(p))
         self.stabiliser = PoseStabiliser()

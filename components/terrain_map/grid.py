@@ -14,9 +14,12 @@ What lives here, and why:
   last seen). :meth:`TerrainGrid.fuse` bins a batch of map-frame points with
   ``np.add.at`` / ``np.minimum.at`` / ``np.maximum.at``, which apply the updates
   one point at a time in input order, so the result equals a per-point Python loop
-  bit for bit. :meth:`TerrainGrid.recentre` scrolls the grid with the vehicle by whole
-  cells: cells that stay inside keep their accumulators exactly, the exposed strips
-  are cleared, nothing is ever interpolated. Origins are whole multiples of the cell
+  bit for bit. A cell's min and max cover only its recent points when the grid has
+  a *window* (see :class:`TerrainGrid`): the extremes of noise that wanders grow with
+  the time a cell is watched, and would read as a step under a parked vehicle.
+  :meth:`TerrainGrid.recentre` scrolls the grid with the vehicle by whole cells:
+  cells that stay inside keep their accumulators exactly, the exposed strips are
+  cleared, nothing is ever interpolated. Origins are whole multiples of the cell
   size (``originX = kx·g``), so a world cell keeps one identity while it stays mapped.
 - :class:`EgoView` — the *ego* map (frame ``Raptor:Front-BumperCenter``, heading-aligned)
   is a nearest-cell *view* of the global grid, re-sampled at each publication from
@@ -275,10 +278,23 @@ class TerrainGrid:
     ``sum_z``, ``sum_z2``, ``min_z``, ``max_z``, ``last_seen``); :meth:`layers` derives
     the published layers. Empty cells hold count 0, sums 0, min +inf, max -inf and
     last_seen -inf, so fusion needs no special case for them.
+
+    **Generations** (``window`` seconds; decision 0040). A cell's points fall into
+    generations: a point opens a new one when it comes ``window`` seconds or more after
+    the start (first point) of the cell's current generation. ``min_z`` and ``max_z``
+    are the extremes of the current generation and the one before it, so they cover a
+    cell's latest ``window`` to ``2·window`` seconds of observation, however long it has
+    been watched; a cell nobody sees keeps its extremes for ever. ``gen_min``,
+    ``gen_max`` and ``gen_start`` hold the current generation's. Count, sums and
+    ``last_seen`` cover every point. The default ``window`` (infinite) keeps a single
+    generation: extremes over every point.
     """
 
-    def __init__(self, geometry: GridGeometry) -> None:
+    def __init__(self, geometry: GridGeometry, *, window: float = math.inf) -> None:
+        if not window > 0:
+            raise ValueError(f"window must be > 0 s, got {window}")
         self._geometry = geometry
+        self.window = float(window)
         n = geometry.size
         self.count = np.zeros(n, dtype=np.int64)
         self.sum_z = np.zeros(n, dtype=np.float64)
@@ -286,6 +302,9 @@ class TerrainGrid:
         self.min_z = np.full(n, np.inf, dtype=np.float64)
         self.max_z = np.full(n, -np.inf, dtype=np.float64)
         self.last_seen = np.full(n, -np.inf, dtype=np.float64)
+        self.gen_min = np.full(n, np.inf, dtype=np.float64)
+        self.gen_max = np.full(n, -np.inf, dtype=np.float64)
+        self.gen_start = np.full(n, -np.inf, dtype=np.float64)
         self._newest = -math.inf  # newest time ever fused (an upper bound of last_seen)
         # scratch for one chunk of points, reused by every fuse
         self._fi, self._fj, self._low, self._z = (np.empty(CHUNK) for _ in range(4))
@@ -301,10 +320,11 @@ class TerrainGrid:
 
     @classmethod
     def centred(cls, centre_x: float, centre_y: float, depth: float, width: float,
-                gridsize: float) -> TerrainGrid:
+                gridsize: float, *, window: float = math.inf) -> TerrainGrid:
         """A grid of ``depth`` × ``width`` metres centred on (centre_x, centre_y); see
         :meth:`GridGeometry.centred`."""
-        return cls(GridGeometry.centred(centre_x, centre_y, depth, width, gridsize))
+        return cls(GridGeometry.centred(centre_x, centre_y, depth, width, gridsize),
+                   window=window)
 
     @property
     def geometry(self) -> GridGeometry:
@@ -312,9 +332,10 @@ class TerrainGrid:
         return self._geometry
 
     def _accumulators(self) -> tuple[NDArray[Any], ...]:
-        return (self.count, self.sum_z, self.sum_z2, self.min_z, self.max_z, self.last_seen)
+        return (self.count, self.sum_z, self.sum_z2, self.min_z, self.max_z, self.last_seen,
+                self.gen_min, self.gen_max, self.gen_start)
 
-    _EMPTY = (0, 0.0, 0.0, np.inf, -np.inf, -np.inf)
+    _EMPTY = (0, 0.0, 0.0, np.inf, -np.inf, -np.inf, np.inf, -np.inf, -np.inf)
 
     def reset(self) -> None:
         """Forget every point, in place (no allocation)."""
@@ -368,7 +389,8 @@ class TerrainGrid:
             fused, nonfinite = FUSE_KERNEL(
                 np.ascontiguousarray(p), float(geo.origin_x), float(geo.origin_y),
                 float(geo.gridsize), int(geo.rows), int(geo.cols), float(time), assign,
-                self.count, self.sum_z, self.sum_z2, self.min_z, self.max_z, self.last_seen)
+                self.window, self.count, self.sum_z, self.sum_z2, self.min_z, self.max_z,
+                self.last_seen, self.gen_min, self.gen_max, self.gen_start)
             if fused and assign:
                 self._newest = time
             return int(fused), int(nonfinite)
@@ -411,6 +433,18 @@ class TerrainGrid:
             np.add.at(self.count, flat, 1)
             np.add.at(self.sum_z, flat, zs)
             np.add.at(self.sum_z2, flat, np.multiply(zs, zs, out=low[:fused]))
+            # A cell opens a new generation at its first point here when its current one
+            # began `window` or more before `time`: the one before is then dropped (its
+            # extremes leave min_z/max_z), the current one becomes the one before.
+            opening = flat[time - self.gen_start.take(flat) >= self.window]
+            if opening.size:
+                self.min_z[opening] = self.gen_min[opening]
+                self.max_z[opening] = self.gen_max[opening]
+                self.gen_min[opening] = np.inf
+                self.gen_max[opening] = -np.inf
+                self.gen_start[opening] = time
+            np.minimum.at(self.gen_min, flat, zs)
+            np.maximum.at(self.gen_max, flat, zs)
             np.minimum.at(self.min_z, flat, zs)
             np.maximum.at(self.max_z, flat, zs)
             if time >= self._newest:  # every stored time is older: plain assignment

@@ -46,17 +46,30 @@ def pose(x: float = 0.0, y: float = 0.0, z: float = 0.0, yaw: float = 0.0,
 
 
 class LoopGrid:
-    """The plain definition: one point at a time, Python floats."""
+    """The plain definition: one point at a time, Python floats. Each cell keeps the
+    list of its generations, each a start time and the heights it got; the extremes are
+    those of the last two."""
 
-    def __init__(self, geometry: GridGeometry) -> None:
+    def __init__(self, geometry: GridGeometry, window: float = math.inf) -> None:
         self.g = geometry
+        self.window = window
         n = geometry.size
         self.count = [0] * n
         self.sum_z = [0.0] * n
         self.sum_z2 = [0.0] * n
-        self.min_z = [math.inf] * n
-        self.max_z = [-math.inf] * n
         self.last_seen = [-math.inf] * n
+        self.generations: list[list[tuple[float, list[float]]]] = [[] for _ in range(n)]
+
+    def _heights(self, c: int) -> list[float]:
+        return [z for _, heights in self.generations[c][-2:] for z in heights]
+
+    @property
+    def min_z(self) -> list[float]:
+        return [min(self._heights(c), default=math.inf) for c in range(self.g.size)]
+
+    @property
+    def max_z(self) -> list[float]:
+        return [max(self._heights(c), default=-math.inf) for c in range(self.g.size)]
 
     def fuse(self, points: np.ndarray, time: float) -> tuple[int, int, int]:
         fused = outside = nonfinite = 0
@@ -78,8 +91,10 @@ class LoopGrid:
             self.count[c] += 1
             self.sum_z[c] += z
             self.sum_z2[c] += z * z
-            self.min_z[c] = min(self.min_z[c], z)
-            self.max_z[c] = max(self.max_z[c], z)
+            generations = self.generations[c]
+            if not generations or time - generations[-1][0] >= self.window:
+                generations.append((time, []))
+            generations[-1][1].append(z)
             self.last_seen[c] = max(self.last_seen[c], time)
             fused += 1
         return fused, outside, nonfinite
@@ -108,12 +123,14 @@ def random_scan(rng: np.random.Generator, geometry: GridGeometry, n: int) -> np.
     return pts
 
 
-@pytest.mark.parametrize("gridsize", [0.2, 0.25])
-def test_fusion_equals_the_per_point_loop_exactly(gridsize: float) -> None:
+@pytest.mark.parametrize(("gridsize", "window"), [(0.2, math.inf), (0.25, math.inf),
+                                                  (0.2, 0.5), (0.25, 0.3)])
+def test_fusion_equals_the_per_point_loop_exactly(gridsize: float, window: float) -> None:
     rng = np.random.default_rng(20240611)
     geometry = GridGeometry.centred(0.3, -0.7, 16.0, 12.0, gridsize)
-    grid, oracle = TerrainGrid(geometry), LoopGrid(geometry)
-    times = [1.0, 1.25, 1.5, 0.75, 2.0]  # one late batch
+    grid = TerrainGrid(geometry, window=window)
+    oracle = LoopGrid(geometry, window)
+    times = [1.0, 1.25, 1.5, 0.75, 2.0, 2.25, 2.5, 3.0]  # one late batch
     for k, t in enumerate(times):
         scan = random_scan(rng, geometry, 361 if k % 2 else 1000)
         if k == 0:
@@ -130,6 +147,33 @@ def test_fusion_equals_the_per_point_loop_exactly(gridsize: float) -> None:
         assert stats.total == len(world)
         oracle.assert_equal(grid)
     assert grid.fused_total > 1000 and grid.outside_total > 100 and grid.nonfinite_total > 40
+
+
+def test_a_watched_cell_keeps_its_recent_extremes_and_an_unwatched_one_keeps_all() -> None:
+    """A parked vehicle watches the same cells for minutes while the placement's error
+    wanders: with generations of 10 s, a cell whose heights drift 1 cm/s for 100 s
+    spreads over its last 10-20 s (0.1-0.2 m), not the 1 m of the whole drift; a cell
+    seen once keeps its 0.5 m step however long the other is watched."""
+    geometry = GridGeometry.centred(0.0, 0.0, 4.0, 4.0, 0.2)
+    windowed = TerrainGrid(geometry, window=10.0)
+    whole = TerrainGrid(geometry)
+    for k in range(1001):
+        t = k / 10
+        points = [(0.1, 0.1, 0.01 * t)]
+        if k == 0:
+            points += [(1.1, 1.1, 0.0), (1.1, 1.1, 0.5)]
+        for grid in (windowed, whole):
+            grid.fuse(np.array(points), t)
+    (wi, wj), (si, sj) = (geometry.cell_index(0.1, 0.1), geometry.cell_index(1.1, 1.1))
+    for grid, low, high in ((windowed, 0.1, 0.2 + 1e-9), (whole, 1.0 - 1e-9, 1.0 + 1e-9)):
+        layers = grid.layers()
+        spread = float(layers.max_height[wi, wj] - layers.min_height[wi, wj])
+        assert low <= spread <= high
+        assert layers.max_height[si, sj] - layers.min_height[si, sj] == pytest.approx(0.5)
+        assert layers.count[wi, wj] == 1001  # counts and means cover every point
+        assert layers.elevation[wi, wj] == pytest.approx(0.5, abs=1e-6)
+    with pytest.raises(ValueError, match="window"):
+        TerrainGrid(geometry, window=0.0)
 
 
 def test_transform_points_small_and_large_batches() -> None:
@@ -528,7 +572,7 @@ def test_stereo_balance() -> None:
                     reason="no compiled fusion (numba missing, or AFA_KERNELS=numpy)")
 def test_compiled_fusion_is_bit_for_bit_the_numpy_one(monkeypatch: pytest.MonkeyPatch) -> None:
     rng = np.random.default_rng(11)
-    grids = [TerrainGrid.centred(3.0, -2.0, 20.0, 30.0, 0.25) for _ in range(2)]
+    grids = [TerrainGrid.centred(3.0, -2.0, 20.0, 30.0, 0.25, window=4.0) for _ in range(2)]
     kernel = grid_module.FUSE_KERNEL
     for step in range(40):
         n = int(rng.integers(0, 3000))

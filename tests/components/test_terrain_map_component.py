@@ -23,7 +23,7 @@ import pytest
 from afa import EDevIO, ETimeOut, System, VirtualClock
 from components.model_server import ModelServer, ModelServerParameters
 from components.terrain_map import TerrainMap, TerrainMapParameters
-from components.terrain_map.component import PENDING_LIMIT, POSE_BUFFER
+from components.terrain_map.component import EXTREMES_WINDOW, PENDING_LIMIT, POSE_BUFFER
 from idl import (
     Map,
     Platform,
@@ -192,6 +192,32 @@ async def test_scans_land_in_their_cells_and_every_map_form_serves_them():
         assert ego.pointCount[i, j] == 60
         assert ego.elevation[i, j] == pytest.approx(np.mean(heights) - ground_z, abs=1e-6)
     assert int((ego.pointCount > 0).sum()) == len(CELLS) == len(ego_seq.cellRow)
+
+
+async def test_a_cell_watched_for_minutes_spreads_over_its_latest_minute_only():
+    """A standing vehicle's placement wanders (here: the scanned ground's heights drift
+    2 mm/s for 150 s, 0.3 m in all): a cell's min and max cover its latest 30-60 s
+    (EXTREMES_WINDOW), so its spread stays under 0.12 m instead of growing to a 0.3 m
+    step; its count and mean still cover every scan."""
+    async with rig() as r:
+        await r.drive(1, world=None)
+        t0 = r.clock.now()
+        point = np.array([[5.1, 0.1, 0.0]])
+        ticks = round(150 / DT)
+        for _ in range(ticks):
+            t = r.clock.now()
+            r.publish_pose(t)
+            point[0, 2] = 0.002 * (t - t0)
+            r.publish_scan(t, point)
+            await r.clock.sleep(DT)
+        await r.clock.sleep(1.0)
+        terrain = await r.map()
+    i, j = cell(terrain, 5.0, 0.0)
+    spread = terrain.maxHeight[i, j] - terrain.minHeight[i, j]
+    assert 0.002 * EXTREMES_WINDOW - 1e-3 <= spread <= 0.002 * 2 * EXTREMES_WINDOW + 1e-3
+    assert terrain.maxHeight[i, j] == pytest.approx(0.002 * 150, abs=0.003)
+    assert terrain.pointCount[i, j] == ticks
+    assert terrain.elevation[i, j] == pytest.approx(0.15, abs=0.003)
 
 
 async def test_no_map_before_map_update_time_then_one_every_interval():
