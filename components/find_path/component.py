@@ -29,8 +29,10 @@ runs one cycle every ``PlanEventInterval`` seconds:
    the farthest point of the D* path between ``MinLookahead`` and ``MaxLookahead`` cells
    along it to which the path runs nearly straight (within half a cell). The vote is
    published as an ``ArcVote`` (behaviour ``FindPath``), and the D* path as
-   ``PlannedPath`` for displays. With no path (no route, the goal impassable
-   and no free cell within its tolerance, or the vehicle off the map) the vote vetoes
+   ``PlannedPath`` for displays. A waypoint beyond the map's planning limits is planned
+   to the passable cell nearest it on the limits (the Global Map moves its grid along a
+   mission longer than the grid, decision 0041). With no path (no route, the goal
+   impassable and no free cell within its tolerance, or the vehicle off the map) the vote vetoes
    every arc, as the seed says, and the ``PlannedPath`` is empty (cost inf), so a display
    does not keep showing a path FindPath no longer has.
 """
@@ -39,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from typing import Any
 
 import numpy as np
@@ -64,6 +67,9 @@ REFINED_LOOKAHEAD = 1.5
 #: Planning cycles in a row without a path after which FindPath reports itself unhealthy
 #: (a single cycle without one is common while a map update closes and reopens a gap).
 NO_PATH_UNHEALTHY = 5
+#: For a waypoint beyond the map, how far (m) from the limits' point nearest it a
+#: passable cell may be taken as the goal.
+BEYOND_SEARCH = 10.0
 
 
 class CostGrid:
@@ -212,6 +218,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
                          "no_path": 0, "cells_updated": 0, "poll_errors": 0,
                          "refined": 0, "undrivable": 0, "invalid_poses": 0}
         self._no_path_streak = 0  # planning cycles in a row that found no path
+        self._no_path_since = 0.0  # when the streak began (clock time)
+        self.beyond = False  # the waypoint lies beyond the planning limits
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
@@ -299,7 +307,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         elif undrivable:
             self.set_health(True, "no drivable way onto the plan from here: backing out")
         else:
-            self.set_health(True, "planning")
+            self.set_health(True, "planning towards a waypoint beyond the map, to its edge"
+                            if self.beyond else "planning")
 
     async def _map(self) -> CostGrid:
         p = self.parameters
@@ -311,8 +320,9 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         window = await self.global_map.getPlanMapChanges(self.grid.revision)
         if window is None:
             return self.grid
-        if (window.fullRows == 0 and window.rows * window.cols != self.grid.raw.size) or \
-                window.planningBoundary != self.grid.boundary:
+        moved = (window.originX, window.originY) != self.grid.origin
+        if (window.fullRows == 0 and (moved or window.rows * window.cols != self.grid.raw.size)) \
+                or window.planningBoundary != self.grid.boundary:
             if window.fullRows:  # a window of a map with new limits: fetch the whole
                 window = await self.global_map.getPlanMap()
             self.grid = CostGrid(window, p.InflationRadius, p.MarginRadius, p.MarginCost)
@@ -328,11 +338,22 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         return self.grid
 
     def _goal_cell(self, grid: CostGrid, waypoint: WaypointIDL) -> tuple[int, int] | None:
+        """The waypoint's cell, or a passable one within its tolerance; for a waypoint
+        beyond the planning limits, the passable cell nearest it within
+        ``BEYOND_SEARCH`` of the limits' nearest point: the plan leads that way, and
+        the Global Map moves its grid before the vehicle gets there (decision 0041)."""
         gx, gy = to_local(waypoint, grid.initial_utm)
         cell = grid.cell_of(gx, gy)
-        if cell is None:
-            return None
-        return grid.free_near(cell, waypoint.tolerance / grid.gridsize)
+        b = grid.boundary
+        self.beyond = cell is None or not (b.minX <= cell[0] <= b.maxX
+                                           and b.minY <= cell[1] <= b.maxY)
+        if not self.beyond:
+            assert cell is not None
+            return grid.free_near(cell, waypoint.tolerance / grid.gridsize)
+        i = math.floor((gx - grid.origin[0]) / grid.gridsize)
+        j = math.floor((gy - grid.origin[1]) / grid.gridsize)
+        nearest = (min(max(i, b.minX), b.maxX), min(max(j, b.minY), b.maxY))
+        return grid.free_near(nearest, BEYOND_SEARCH / grid.gridsize)
 
     def _plan(self, grid: CostGrid, start: tuple[int, int], goal: tuple[int, int]
               ) -> PlanStatus:
@@ -407,9 +428,12 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         """Veto every arc, and publish the empty path (displays drop the old one)."""
         self.counters["no_path"] += 1
         self._no_path_streak += 1
-        if self._no_path_streak >= NO_PATH_UNHEALTHY:
-            self.set_health(False, f"no path to the waypoint for {self._no_path_streak} "
-                                   "cycles: every arc vetoed")
+        if self._no_path_streak == 1:
+            self._no_path_since = self.clock.now()
+        if self._no_path_streak >= NO_PATH_UNHEALTHY:  # one detail for the streak: one log
+            since = time.strftime("%H:%M:%S", time.gmtime(self._no_path_since))
+            self.set_health(False, f"no path to the waypoint since {since} UTC: every arc "
+                                   "vetoed")
         self.path = []
         stamp = TimeIDL.from_seconds(self.clock.now())
         self.votes.publish(ArcVotes.halt(len(self.arcs)).to_idl(

@@ -40,6 +40,8 @@ Design choices:
 - **Transforms**: the planning frame is the grid in cell units: node (x, y) is cell
   [x, y], covering planning coordinates [x, x+1) × [y, y+1). ^P T_W scales by
   1/gridsize (uniformly, a similarity) after moving the grid's origin to 0.
+- **Moving** (:meth:`PlanningGrid.shift`): by whole cells, so a world cell keeps its
+  layers while it stays inside; cells that come in are unknown.
 """
 
 from __future__ import annotations
@@ -49,9 +51,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from components.terrain_map.grid import GridGeometry
+from components.terrain_map.grid import GridGeometry, shift_cells
 
-__all__ = ["CostMapping", "Region", "MapChange", "PlanningGrid", "cost_floor_is_admissible"]
+__all__ = ["CostMapping", "Region", "MapChange", "PlanningGrid", "cost_floor_is_admissible",
+           "mission_shift"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -225,6 +228,21 @@ class PlanningGrid:
         t[1, 3] = self.geometry.origin_y
         return t
 
+    def shift(self, di: int, dj: int) -> None:
+        """Move the grid by whole cells (its origin by ``di``, ``dj`` cells): a world
+        cell inside both placements keeps every layer; the cells that come in are
+        unknown (a priori cost ``unknown``, never sensed)."""
+        if not (di or dj):
+            return
+        unknown = self.cost_mapping.unknown
+        for layer, empty in ((self.a_priori, unknown), (self.sensed_cost, unknown),
+                             (self.sensed, False), (self.hazard, np.nan),
+                             (self.goodness, 0.0), (self.stamp, -np.inf)):
+            shift_cells(layer, di, dj, empty)
+        g = self.geometry
+        self.geometry = GridGeometry(g.origin_x + di * g.gridsize, g.origin_y + dj * g.gridsize,
+                                     g.gridsize, g.rows, g.cols)
+
     # ------------------------------------------------------------------ costs
     def cost(self) -> FloatArray:
         """The planning cost of every cell: sensed cost once sensed, else a priori."""
@@ -355,3 +373,48 @@ def cost_floor_is_admissible(costs: ArrayLike) -> bool:
     """Whether every cost is ≥ 1 or inf (what an octile heuristic needs)."""
     c = np.asarray(costs)
     return bool(np.all(c >= 1.0))
+
+
+def mission_shift(geometry: GridGeometry, vehicle: tuple[float, float],
+                  waypoints: list[tuple[float, float]], margin: float) -> tuple[int, int]:
+    """The whole-cell move (di, dj) of a grid at ``geometry`` that keeps the mission
+    inside it, at least ``margin`` metres from its edges; (0, 0) when no move is needed.
+
+    ``waypoints`` are the mission's ahead of the vehicle, in the order it will drive
+    them (world x, y). The grid should hold the vehicle and the longest run of them,
+    from the first, that fits: when those are inside, nothing moves; otherwise the grid
+    is centred on their bounding box. When even the first one does not fit with the
+    vehicle (a leg longer than the grid), the grid is placed along the way to it, the
+    vehicle ``margin`` from the trailing edge, and placed again when less than half of
+    that lead is left ahead of the vehicle.
+    """
+    g = geometry.gridsize
+    size = np.array([geometry.rows * g, geometry.cols * g])
+    low_edge = np.array([geometry.origin_x, geometry.origin_y])
+    here = np.asarray(vehicle, dtype=np.float64)
+
+    def fits(points: NDArray[np.float64]) -> bool:
+        return bool(np.all(points.max(axis=0) - points.min(axis=0) <= size - 2 * margin))
+
+    ahead = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
+    k = len(ahead)
+    while k and not fits(np.vstack([here, ahead[:k]])):
+        k -= 1
+    points = np.vstack([here, ahead[:k]])
+    held = bool(np.all(points >= low_edge + margin)
+                and np.all(points <= low_edge + size - margin))
+    if k or not len(ahead):
+        if held:
+            return (0, 0)
+        centre = (points.min(axis=0) + points.max(axis=0)) / 2
+    else:  # a leg longer than the grid: the grid ahead of the vehicle, along the leg
+        direction = ahead[0] - here
+        direction /= np.linalg.norm(direction)
+        lead = size / 2 - margin  # the vehicle `margin` from the trailing edge
+        if held and np.all(np.abs(low_edge + size / 2 - here) <= lead) \
+                and np.dot(low_edge + size / 2 - here, direction) >= np.min(lead) / 2:
+            return (0, 0)  # still at least half the lead ahead of the vehicle
+        centre = here + direction * lead
+    di, dj = np.round((centre - size / 2 - low_edge) / g).astype(int)
+    return (int(di), int(dj))
+

@@ -14,6 +14,13 @@
 - Keeps the waypoint list (set as Pure Pursuit's is) and the current waypoint: it
   advances when the vehicle position of a traversability map comes within the
   waypoint's tolerance, and wraps in patrol mode.
+- Keeps the mission inside the grid (decision 0041): when the vehicle or the
+  waypoints ahead of it come within ``MISSION_MARGIN`` of the grid's edge, the grid
+  moves by whole cells (:func:`~components.global_map.accumulate.mission_shift`) to
+  hold the vehicle and as many of the waypoints ahead as fit; what it had sensed
+  inside the new placement is kept, and the planning boundary stays where the operator
+  set it on the ground (it is kept whole and clipped to each placement).
+  A PlanMap of the whole grid, with its new origin, tells the planner.
 - Bad input is counted in ``statistics()``, not merged, and makes the component
   unhealthy until a map is accepted ``BAD_INPUT_WINDOW`` seconds later (its detail naming
   it, :mod:`components.bad_input`): a map stamped more than ``FUTURE_TOLERANCE`` ahead
@@ -35,7 +42,7 @@ import numpy as np
 from afa import Event, SubscribePublishServer
 from afa.errors import EOutOfBounds
 from components.bad_input import BAD_INPUT_WINDOW, FUTURE_TOLERANCE, BadInputLog
-from components.global_map.accumulate import CostMapping, PlanningGrid, Region
+from components.global_map.accumulate import CostMapping, PlanningGrid, Region, mission_shift
 from components.global_map.parameters import GlobalMapParameters
 from components.waypoints import to_local
 from idl import GlobalMap as GlobalMapInterface
@@ -51,10 +58,13 @@ from idl import (
     WaypointIDL,
 )
 
-__all__ = ["GlobalMap", "CHANGE_LOG"]
+__all__ = ["GlobalMap", "CHANGE_LOG", "MISSION_MARGIN"]
 
 #: How many merges' changed windows are remembered for getPlanMapChanges.
 CHANGE_LOG = 512
+#: The mission is kept this far (m) inside the grid's edges, or an eighth of the grid's
+#: size when that is less: room to plan round an obstacle at a waypoint or at the edge.
+MISSION_MARGIN = 15.0
 
 
 class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
@@ -71,7 +81,12 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
         self.revision = 0
         self._log: deque[tuple[int, Region]] = deque(maxlen=CHANGE_LOG)
         self.boundary = self._whole()
+        # the operator's planning boundary in the cells of the grid's first placement
+        # (None: the whole grid), and how far the grid has moved since (cells)
+        self._fence: tuple[int, int, int, int] | None = None
+        self._moved = (0, 0)
         self.waypoints = WaypointGroupIDL()
+        self._local: tuple[tuple[float, ...], list[tuple[float, float]]] = ((), [])
         self.current = 0
         self.finished = False
         self.initial_utm: np.ndarray | None = None
@@ -81,7 +96,7 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
         self.bad_input = BadInputLog(BAD_INPUT_WINDOW)
         self.counters = {"maps_merged": 0, "cells_changed": 0, "plan_maps_published": 0,
                          "waypoints_reached": 0, "cells_outside": 0, "future_maps": 0,
-                         "grid_mismatch": 0}
+                         "grid_mismatch": 0, "grid_moves": 0}
 
     async def setup(self) -> None:
         self.bad_input.clear()
@@ -122,10 +137,13 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
                 self.log.warning("%s: the world frame's origin moved: the map starts again",
                                  self.name)
                 self.grid = self._new_grid()
+                self._moved = (0, 0)
+                self.boundary = self._placed_boundary() or self._whole()
                 self._changed(Region(0, self.grid.geometry.rows, 0, self.grid.geometry.cols))
             self.initial_utm = np.array(body.initialUTM)
         self.vehicle = body.vehiclePosition
         self.heading = body.vehicleHeading
+        self._keep_mission_inside()
         change = self.grid.merge(body.hazard, body.goodness, body.mapPose, body.originX,
                                  body.originY, body.gridsize, body.time.to_seconds())
         self.counters["maps_merged"] += 1
@@ -173,6 +191,33 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
             self.current = 0
         else:
             self.finished = True
+
+    def _keep_mission_inside(self) -> None:
+        """Move the grid when the vehicle or the waypoints ahead come near its edge."""
+        if self.vehicle is None or self.initial_utm is None:
+            return
+        utm = tuple(self.initial_utm)
+        if self._local[0] != utm:  # the waypoints in the world frame, once per list
+            self._local = (utm, [to_local(w, self.initial_utm)
+                                 for w in self.waypoints.waypoints])
+        points = self._local[1]
+        ahead = [] if self.finished else points[self.current:]
+        if self.waypoints.patrolMode and not self.finished:
+            ahead = ahead + points[:self.current]
+        geometry = self.grid.geometry
+        margin = min(MISSION_MARGIN, geometry.rows * geometry.gridsize / 8,
+                     geometry.cols * geometry.gridsize / 8)
+        di, dj = mission_shift(geometry, (self.vehicle.x, self.vehicle.y), ahead, margin)
+        if not (di or dj):
+            return
+        self.grid.shift(di, dj)
+        self._moved = (self._moved[0] + di, self._moved[1] + dj)
+        self.boundary = self._placed_boundary() or self._whole()
+        rows, cols = geometry.shape
+        self.counters["grid_moves"] += 1
+        self.log.info("%s: the planning grid moved %d, %d cells to keep the mission inside",
+                      self.name, di, dj)
+        self._changed(Region(0, rows, 0, cols))
 
     # -- Table 18 ----------------------------------------------------------------------------
     def _cell(self, p: PlanPointIDL) -> tuple[int, int]:
@@ -252,8 +297,10 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
 
     async def setWaypointList(self, waypoints: WaypointGroupIDL) -> None:
         self.waypoints = waypoints
+        self._local = ((), [])
         self.current = 0
         self.finished = False
+        self._keep_mission_inside()
 
     async def getWaypointList(self) -> WaypointGroupIDL:
         return self.waypoints
@@ -263,17 +310,35 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
             return None
         return self.waypoints.waypoints[self.current]
 
-    async def setPlanningBoundary(self, boundary: PlanningBoundaryIDL) -> bool:
+    def _placed_boundary(self, fence: tuple[int, int, int, int] | None = None
+                         ) -> PlanningBoundaryIDL | None:
+        """The operator's boundary (``fence``, default the one set) in the grid's cells
+        where it lies now, clipped to the grid; the whole grid when none is set; None
+        when none of it is inside."""
+        fence = self._fence if fence is None else fence
+        if fence is None:
+            return self._whole()
         rows, cols = self.grid.geometry.shape
-        clipped = (max(0, boundary.minX), max(0, boundary.minY), min(rows - 1, boundary.maxX),
-                   min(cols - 1, boundary.maxY))
+        di, dj = self._moved
+        clipped = (max(0, fence[0] - di), max(0, fence[1] - dj),
+                   min(rows - 1, fence[2] - di), min(cols - 1, fence[3] - dj))
         if clipped[2] < clipped[0] or clipped[3] < clipped[1]:
+            return None
+        return PlanningBoundaryIDL(minX=clipped[0], minY=clipped[1], maxX=clipped[2],
+                                   maxY=clipped[3])
+
+    async def setPlanningBoundary(self, boundary: PlanningBoundaryIDL) -> bool:
+        di, dj = self._moved
+        fence = (boundary.minX + di, boundary.minY + dj, boundary.maxX + di,
+                 boundary.maxY + dj)
+        placed = self._placed_boundary(fence)
+        if placed is None:
             return False
-        boundary = PlanningBoundaryIDL(minX=clipped[0], minY=clipped[1], maxX=clipped[2],
-                                       maxY=clipped[3])
-        if boundary != self.boundary:
-            self.boundary = boundary
+        self._fence = fence  # kept whole: the grid may move over more of it later
+        if placed != self.boundary:
+            self.boundary = placed
             # a planner holding the map must learn the new limits: a change of the whole
+            rows, cols = self.grid.geometry.shape
             self._changed(Region(0, rows, 0, cols))
         return True
 

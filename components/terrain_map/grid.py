@@ -61,6 +61,7 @@ __all__ = [
     "TerrainLayers",
     "FuseStats",
     "TerrainGrid",
+    "shift_cells",
     "transform_points",
     "SMALL_BATCH",
     "CHUNK",
@@ -511,22 +512,9 @@ class TerrainGrid:
 
     def _shift(self, di: int, dj: int) -> None:
         """Move contents so that new cell [i, j] holds old cell [i + di, j + dj]."""
-        rows, cols = self._geometry.rows, self._geometry.cols
-        if abs(di) >= rows or abs(dj) >= cols:
-            self.reset()
-            return
-        dst_i, src_i = _overlap(di, rows)
-        dst_j, src_j = _overlap(dj, cols)
-        clear_i = slice(rows - di, rows) if di > 0 else slice(0, -di)
-        clear_j = slice(cols - dj, cols) if dj > 0 else slice(0, -dj)
+        shape = self._geometry.shape
         for array, empty in zip(self._accumulators(), self._EMPTY, strict=True):
-            grid = array.reshape(rows, cols)
-            # numpy buffers overlapping copies, so this is a safe in-place move
-            grid[dst_i, dst_j] = grid[src_i, src_j]
-            if di:
-                grid[clear_i, :] = empty
-            if dj:
-                grid[:, clear_j] = empty
+            shift_cells(array.reshape(shape), di, dj, empty)
 
     # ------------------------------------------------------------------ layers
     def layers(self) -> TerrainLayers:
@@ -553,6 +541,23 @@ class TerrainGrid:
             count=count.astype(np.int32).reshape(rows, cols),
             variance=variance.astype(np.float32).reshape(rows, cols),
             last_seen=seen.reshape(rows, cols))
+
+
+def shift_cells(grid: NDArray[Any], di: int, dj: int, empty: Any) -> None:
+    """Move a (rows, cols) layer in place so that cell [i, j] holds what cell
+    [i + di, j + dj] held; cells with no source get ``empty``."""
+    rows, cols = grid.shape
+    if abs(di) >= rows or abs(dj) >= cols:
+        grid.fill(empty)
+        return
+    dst_i, src_i = _overlap(di, rows)
+    dst_j, src_j = _overlap(dj, cols)
+    # numpy buffers overlapping copies, so this is a safe in-place move
+    grid[dst_i, dst_j] = grid[src_i, src_j]
+    if di:
+        grid[slice(rows - di, rows) if di > 0 else slice(0, -di), :] = empty
+    if dj:
+        grid[:, slice(cols - dj, cols) if dj > 0 else slice(0, -dj)] = empty
 
 
 def _overlap(shift: int, n: int) -> tuple[slice, slice]:

@@ -83,9 +83,10 @@ class ReplayedPose(SubscribePublishServer):
 Box = tuple[float, float, float, float]  # x0, x1, y0, y1 (m, world frame)
 
 
-def traverse(boxes: list[Box], t: float) -> TravMapArrayEventIDL:
+def traverse(boxes: list[Box], t: float, vehicle: tuple[float, float] = (-15.0, -15.0)
+             ) -> TravMapArrayEventIDL:
     """A sensed global traversability map around the start: free ground, hazards in
-    ``boxes`` (cells whose centres lie inside)."""
+    ``boxes`` (cells whose centres lie inside), sensed from ``vehicle``."""
     centres = TRAV_ORIGIN + (np.arange(TRAV_CELLS) + 0.5) * CELL
     x, y = np.meshgrid(centres, centres, indexing="ij")
     hazard = np.zeros((TRAV_CELLS, TRAV_CELLS), dtype=np.float32)
@@ -95,7 +96,8 @@ def traverse(boxes: list[Box], t: float) -> TravMapArrayEventIDL:
         time=TimeIDL.from_seconds(t), frame="World", mapPose=np.eye(4),
         initialUTM=INITIAL_UTM, gridsize=CELL, originX=TRAV_ORIGIN, originY=TRAV_ORIGIN,
         rows=TRAV_CELLS, cols=TRAV_CELLS, hazard=hazard,
-        goodness=np.ones_like(hazard), vehiclePosition=Position3DIDL(x=-15.0, y=-15.0),
+        goodness=np.ones_like(hazard), vehiclePosition=Position3DIDL(x=vehicle[0],
+                                                                     y=vehicle[1]),
         vehicleHeading=0.0)
 
 
@@ -128,9 +130,9 @@ class Rig:
     votes: Subscription
     paths: Subscription
 
-    def sense(self, boxes: list[Box]) -> None:
-        self.system.channel.publish("Raptor", "Traverse", traverse(boxes, self.clock.now()),
-                                    origin="test")
+    def sense(self, boxes: list[Box], vehicle: tuple[float, float] = (-15.0, -15.0)) -> None:
+        self.system.channel.publish("Raptor", "Traverse",
+                                    traverse(boxes, self.clock.now(), vehicle), origin="test")
 
     async def until(self, t: float) -> None:
         await self.clock.advance(t - self.clock.monotonic())
@@ -223,7 +225,31 @@ async def test_health_says_planning_and_turns_unhealthy_when_no_path_persists():
         await r.until(NO_PATH_UNHEALTHY + 0.5)
         health = r.planner.health()
         assert not health.healthy
-        assert f"no path to the waypoint for {NO_PATH_UNHEALTHY} cycles" in health.detail
+        assert "no path to the waypoint since 00:00:01 UTC" in health.detail
+        await r.until(NO_PATH_UNHEALTHY + 3.5)  # the same streak: the same detail, logged once
+        assert r.planner.health().detail == health.detail
+
+
+async def test_a_waypoint_beyond_the_map_is_planned_to_its_edge_then_on_as_the_map_moves():
+    """The waypoint lies 100 m east, beyond the 60 m Global Map: FindPath plans to the
+    map's edge nearest it and says so; when the Global Map moves along the leg (its
+    next merge), FindPath plans afresh on the moved grid, further east."""
+    async with rig(waypoint(100.0, 0.0), []) as r:
+        await r.until(2.5)
+        assert r.planner.health().detail == ("planning towards a waypoint beyond the map, "
+                                             "to its edge")
+        before = r.drain(r.paths)[-1].body.points
+        assert 29.0 <= before[-1][0] < 30.0 and abs(before[-1][1]) <= CELL  # the east edge
+        plans = r.planner.statistics()["plans"]
+        r.pose.place(12.0, 0.0)  # driven on: the grid's lead ahead is used up
+        r.sense([], vehicle=(12.0, 0.0))  # its next map: the Global Map moves along the leg
+        await r.until(4.5)
+        after = r.drain(r.paths)[-1].body.points
+        stats = r.planner.statistics()
+    assert stats["plans"] == plans + 1  # afresh, on the moved grid
+    assert math.dist(after[0], (12.0, 0.0)) <= CELL
+    assert after[-1][0] > 45.0 and abs(after[-1][1]) <= CELL
+    assert np.all(np.diff(after[:, 0]) > 0)  # straight on east
 
 
 # --------------------------------------------------------------------------- replanning

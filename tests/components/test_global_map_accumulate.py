@@ -13,6 +13,7 @@ from components.global_map.accumulate import (
     PlanningGrid,
     Region,
     cost_floor_is_admissible,
+    mission_shift,
 )
 from components.global_map.parameters import GlobalMapParameters
 
@@ -202,3 +203,101 @@ def test_planning_transforms() -> None:
     np.testing.assert_allclose(centre[:, 1], j + 0.5, atol=1e-9)
     with pytest.raises(ValueError):
         grid.world_to_cell(math.nan, 0.0)
+
+
+# --- moving the grid ----------------------------------------------------------------------
+
+
+def by_world_cell(grid: PlanningGrid) -> dict[tuple[int, int], tuple[float, ...]]:
+    """Every cell's layers keyed by the world cell it covers (whole-cell indices of the
+    world frame), NaN written as a string so that dictionaries compare."""
+    g = grid.geometry
+    out = {}
+    for i in range(g.rows):
+        for j in range(g.cols):
+            key = (round(g.origin_x / g.gridsize) + i, round(g.origin_y / g.gridsize) + j)
+            out[key] = tuple("nan" if isinstance(v, float) and math.isnan(v) else v
+                             for v in (float(grid.a_priori[i, j]), float(grid.sensed_cost[i, j]),
+                                       bool(grid.sensed[i, j]), float(grid.hazard[i, j]),
+                                       float(grid.goodness[i, j]), float(grid.stamp[i, j])))
+    return out
+
+
+@pytest.mark.parametrize("move", [(3, -2), (-7, 0), (0, 5), (12, 1), (-1, -9)])
+def test_a_moved_grid_keeps_every_world_cell_that_stays_inside(move):
+    rng = np.random.default_rng(5)
+    grid = PlanningGrid.centred(0.0, 0.0, 5.0, 4.0, 0.5, CostMapping(unknown=2.0))
+    hazard = rng.uniform(0, 1.2, (10, 8))
+    hazard[rng.random((10, 8)) < 0.3] = np.nan
+    grid.merge(hazard, rng.uniform(0.2, 1, (10, 8)), np.eye(4), -2.5, -2.0, 0.5, 3.0)
+    grid.set_a_priori([1, 4], [2, 6], [5.0, np.inf])
+    before = by_world_cell(grid)
+    grid.shift(*move)
+    after = by_world_cell(grid)
+    unknown = (2.0, 2.0, False, "nan", 0.0, -math.inf)
+    assert len(after) == 80
+    kept = 0
+    for key, layers in after.items():
+        if key in before:
+            assert layers == before[key]
+            kept += 1
+        else:
+            assert layers == unknown
+    assert kept == max(0, 10 - abs(move[0])) * max(0, 8 - abs(move[1]))
+
+
+def inside(geometry, points, margin: float) -> bool:
+    x0, y0 = geometry.origin_x, geometry.origin_y
+    x1, y1 = x0 + geometry.rows * geometry.gridsize, y0 + geometry.cols * geometry.gridsize
+    return all(x0 + margin <= x <= x1 - margin and y0 + margin <= y <= y1 - margin
+               for x, y in points)
+
+
+def moved(geometry, shift):
+    grid = PlanningGrid(geometry)
+    grid.shift(*shift)
+    return grid.geometry
+
+
+def test_the_mission_shift_keeps_the_mission_inside():
+    geometry = PlanningGrid.centred(0.0, 0.0, 100.0, 100.0, 0.5).geometry  # -50 .. 50
+    margin = 10.0
+    # everything inside already: no move
+    assert mission_shift(geometry, (0.0, 0.0), [(30.0, 0.0), (-35.0, 39.0)], margin) == (0, 0)
+    # the second waypoint beyond the edge, the mission 70 m long: it all fits, centred
+    course = [(20.0, 0.0), (70.0, 10.0)]
+    shift = mission_shift(geometry, (0.0, 0.0), course, margin)
+    assert shift != (0, 0)
+    assert inside(moved(geometry, shift), [(0.0, 0.0), *course], margin - 0.5)
+    # the third does not fit with the others: the grid holds the vehicle and the two
+    course3 = [*course, (150.0, -60.0)]
+    assert mission_shift(geometry, (0.0, 0.0), course3, margin) == shift
+    # once the vehicle is at the second, the third and the vehicle fit: held together
+    later = mission_shift(moved(geometry, shift), (70.0, 10.0), course3[2:], margin)
+    assert inside(moved(moved(geometry, shift), later), [(70.0, 10.0), (150.0, -60.0)],
+                  margin - 0.5)
+
+
+def test_a_leg_longer_than_the_grid_places_the_grid_along_it():
+    geometry = PlanningGrid.centred(0.0, 0.0, 100.0, 100.0, 0.5).geometry
+    margin = 10.0
+    for vehicle, goal in [((0.0, 0.0), (400.0, 0.0)), ((0.0, 0.0), (-300.0, -300.0)),
+                          ((45.0, 0.0), (500.0, 0.0))]:
+        there = moved(geometry, mission_shift(geometry, vehicle, [goal], margin))
+        assert inside(there, [vehicle], margin - 0.5)
+        centre = np.array([there.origin_x + 50.0, there.origin_y + 50.0])
+        towards = np.subtract(goal, vehicle) / np.linalg.norm(np.subtract(goal, vehicle))
+        # most of the grid lies ahead of the vehicle, towards the goal
+        assert np.dot(centre - vehicle, towards) >= 30.0
+        # driving on along the leg: the grid stays until half its lead is used up
+        for step in (10.0, 19.0):
+            on = tuple(np.add(vehicle, towards * step))
+            assert mission_shift(there, on, [goal], margin) == (0, 0)
+        on = tuple(np.add(vehicle, towards * 40.0))
+        again = moved(there, mission_shift(there, on, [goal], margin))
+        assert np.dot(np.array([again.origin_x + 50.0, again.origin_y + 50.0]) - on,
+                      towards) >= 30.0
+    # a vehicle with nothing ahead, outside the grid: the grid comes to it
+    there = moved(geometry, mission_shift(geometry, (120.0, 0.0), [], margin))
+    assert inside(there, [(120.0, 0.0)], margin)
+

@@ -246,6 +246,43 @@ async def test_the_planning_boundary_is_clipped_and_limits_valid():
     assert whole.planningBoundary.maxX == 40
 
 
+async def test_the_grid_moves_along_a_mission_longer_than_it_keeping_what_it_sensed():
+    """A waypoint 60 m away on a 50 m grid: the grid moves along the leg (the vehicle
+    6.25 m, an eighth of the grid, from its trailing edge); the wall sensed before the
+    move is still where it was on the ground, the cells that came in are unknown, the
+    operator's boundary stays on the same ground, and a planner learns of it all from a
+    PlanMap of the whole grid with its new origin."""
+    async with rig() as r:
+        g = r.proxy
+        await r.publish(trav_map(r.clock.now(), scene()))
+        wall = node(2.25, 0.25)
+        assert await g.getSensingMap(P(wall)) == math.inf
+        assert await g.setPlanningBoundary(PlanningBoundaryIDL(minX=10, minY=0, maxX=60,
+                                                               maxY=N - 1))
+        drain(r.events)
+        await g.setWaypointList(WaypointGroupIDL(waypoints=(waypoint(60.0, 0.0),)))
+        moved = drain(r.events)
+        to_planning = (await g.getTransformToPlanningFromWorld()).HTransform
+        shift = round(HALF / G - to_planning[0, 3])  # cells the origin moved along x
+        assert 30 <= shift <= 40 and to_planning[1, 3] == pytest.approx(HALF / G)
+        assert r.stats()["grid_moves"] == 1
+        assert len(moved) == 1 and moved[0].body.fullRows == 0
+        assert moved[0].body.originX == pytest.approx(-HALF + shift * G)
+        # the wall: the same ground, another node; the ground ahead: unknown
+        assert await g.getSensingMap(P((wall[0] - shift, wall[1]))) == math.inf
+        assert await g.getSensingMap(P((N - 1, N // 2))) == 2.0
+        assert not (await g.getMap(P((N - 1, N // 2)))).sensed
+        # the boundary: world cells 10..60 along x, now cells 0..60 - shift
+        assert await g.getPlanningBoundary() == PlanningBoundaryIDL(
+            minX=0, minY=0, maxX=60 - shift, maxY=N - 1)
+        # a map arriving after the move lands on its own ground
+        await r.publish(trav_map(r.clock.now(), scene(), origin=(10.0, -4.0)))
+        assert await g.getSensingMap(P(node(16.25 - shift * G, 0.25))) == math.inf
+        # nothing moves while the vehicle keeps more than half the lead ahead
+        await r.publish(trav_map(r.clock.now(), scene(), vehicle=(5.0, 0.0)))
+        assert r.stats()["grid_moves"] == 1
+
+
 # --- bulk access and PlanMap events ---------------------------------------------------------
 
 
