@@ -338,18 +338,17 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         return self.grid
 
     def _goal_cell(self, grid: CostGrid, waypoint: WaypointIDL) -> tuple[int, int] | None:
-        """The waypoint's cell, or a passable one within its tolerance; for a waypoint
-        beyond the planning limits, the passable cell nearest it within
-        ``BEYOND_SEARCH`` of the limits' nearest point: the plan leads that way, and
-        the Global Map moves its grid before the vehicle gets there (decision 0041)."""
+        """The waypoint's cell, or a passable one within its tolerance (none when it
+        lies outside the operator's planning boundary); for a waypoint beyond the grid,
+        the passable cell nearest it within ``BEYOND_SEARCH`` of the planning limits'
+        point nearest it: the plan leads that way, and the Global Map moves its grid
+        before the vehicle gets there (decision 0041)."""
         gx, gy = to_local(waypoint, grid.initial_utm)
         cell = grid.cell_of(gx, gy)
-        b = grid.boundary
-        self.beyond = cell is None or not (b.minX <= cell[0] <= b.maxX
-                                           and b.minY <= cell[1] <= b.maxY)
-        if not self.beyond:
-            assert cell is not None
+        self.beyond = cell is None
+        if cell is not None:
             return grid.free_near(cell, waypoint.tolerance / grid.gridsize)
+        b = grid.boundary
         i = math.floor((gx - grid.origin[0]) / grid.gridsize)
         j = math.floor((gy - grid.origin[1]) / grid.gridsize)
         nearest = (min(max(i, b.minX), b.maxX), min(max(j, b.minY), b.maxY))
