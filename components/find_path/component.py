@@ -343,6 +343,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         the passable cell nearest it within ``BEYOND_SEARCH`` of the planning limits'
         point nearest it: the plan leads that way, and the Global Map moves its grid
         before the vehicle gets there (decision 0041)."""
+        if not grid.initial_utm.any():  # no map merged yet: no world frame to plan in
+            return None
         gx, gy = to_local(waypoint, grid.initial_utm)
         cell = grid.cell_of(gx, gy)
         self.beyond = cell is None

@@ -150,7 +150,8 @@ class Rig:
 
 
 @asynccontextmanager
-async def rig(goal: WaypointIDL, boxes: list[Box], **parameters: Any) -> AsyncIterator[Rig]:
+async def rig(goal: WaypointIDL, boxes: list[Box] | None, **parameters: Any
+              ) -> AsyncIterator[Rig]:
     clock = VirtualClock(start=0.0)
     planner = FindPath("FindPathService", FindPathParameters(**{
         "PlanUpdateDelayTime": 1.0, **parameters}))
@@ -163,7 +164,8 @@ async def rig(goal: WaypointIDL, boxes: list[Box], **parameters: Any) -> AsyncIt
         paths = system.channel.subscribe("Raptor", "PlannedPath", maxsize=1024)
         global_map = await system.resolve(GlobalMapInterface, "GlobalMap")
         r = Rig(clock, system, planner, pose, global_map, votes, paths)
-        r.sense(boxes)
+        if boxes is not None:  # None: no map yet
+            r.sense(boxes)
         await global_map.setWaypointList(WaypointGroupIDL(waypoints=(goal,)))
         yield r
 
@@ -228,6 +230,18 @@ async def test_health_says_planning_and_turns_unhealthy_when_no_path_persists():
         assert "no path to the waypoint since 00:00:01 UTC" in health.detail
         await r.until(NO_PATH_UNHEALTHY + 3.5)  # the same streak: the same detail, logged once
         assert r.planner.health().detail == health.detail
+
+
+async def test_before_the_first_map_it_vetoes_rather_than_plan_in_no_frame():
+    """Until a map is merged the Global Map has no world frame (initialUTM zero): the
+    waypoint has no place on the grid, and FindPath must not read it as one beyond the
+    map and steer for an edge."""
+    async with rig(waypoint(16.0, 0.0), None) as r:
+        await r.until(3.5)
+        votes = r.drain(r.votes)
+        detail = r.planner.health().detail
+    assert votes and all(e.body.veto.all() for e in votes)
+    assert "beyond" not in detail
 
 
 async def test_a_waypoint_beyond_the_map_is_planned_to_its_edge_then_on_as_the_map_moves():
