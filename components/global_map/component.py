@@ -12,8 +12,10 @@
   (x, y) is cell [x, y]; see :mod:`idl.planning`), and the bulk access of decision 0009
   (``getPlanMap``, ``getPlanMapChanges(revision)``) that FindPath plans from.
 - Keeps the waypoint list (set as Pure Pursuit's is) and the current waypoint: it
-  advances when the vehicle position of a traversability map comes within the
-  waypoint's tolerance, and wraps in patrol mode.
+  advances when the vehicle's rear axle (``PoseEventName``, the point Pure Pursuit and
+  FindPath steer) comes within the waypoint's tolerance, and wraps in patrol mode.
+  Without poses (``PoseEventName`` empty, or none yet in the maps' frame), the
+  traversability maps' vehicle position (the ground under the front bumper) decides.
 - Keeps the mission inside the grid (decision 0041): when the vehicle or the
   waypoints ahead of it come within ``MISSION_MARGIN`` of the grid's edge, the grid
   moves by whole cells (:func:`~components.global_map.accumulate.mission_shift`) to
@@ -75,6 +77,8 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
         p = self.parameters
         self.subscribes(p.TraverseEventName, TravMapArrayEventIDL, self._on_map, maxsize=4,
                         required=True)
+        if p.PoseEventName:
+            self.subscribes(p.PoseEventName, PoseTransformIDL, self._on_pose, maxsize=4)
         self.plan_maps = self.publishes(p.PlanMapEventName, PlanMapEventIDL)
         self.serves(GlobalMapInterface, p.InterfaceName)
         self.grid = self._new_grid()
@@ -91,6 +95,7 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
         self.finished = False
         self.initial_utm: np.ndarray | None = None
         self.vehicle: Position3DIDL | None = None
+        self.axle: tuple[float, float] | None = None  # the latest pose's, in the maps' frame
         self.heading = 0.0
         self._whole_map: PlanMapEventIDL | None = None
         self.bad_input = BadInputLog(BAD_INPUT_WINDOW)
@@ -141,6 +146,7 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
                 self.boundary = self._placed_boundary() or self._whole()
                 self._changed(Region(0, self.grid.geometry.rows, 0, self.grid.geometry.cols))
             self.initial_utm = np.array(body.initialUTM)
+            self.axle = None  # a pose of another frame
         self.vehicle = body.vehiclePosition
         self.heading = body.vehicleHeading
         self._keep_mission_inside()
@@ -176,13 +182,35 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
             fullCols=cols if region is not None else 0)
 
     # -- waypoints -------------------------------------------------------------------------
-    def _track_waypoint(self) -> None:
+    def _on_pose(self, event: Event) -> None:
+        pose: PoseTransformIDL = event.body  # type: ignore[assignment]
+        if self.initial_utm is not None and not np.array_equal(pose.initialUTM,
+                                                               self.initial_utm):
+            return  # not the maps' frame
+        x, y = float(pose.HTransform[0, 3]), float(pose.HTransform[1, 3])
+        if math.isfinite(x) and math.isfinite(y) and np.any(pose.initialUTM):
+            # before the first map the pose's own frame places the waypoints: a waypoint
+            # where the vehicle starts is reached before it drives away
+            self.axle = (x, y)
+            self._track_waypoint(np.asarray(pose.initialUTM))
+
+    def _track_waypoint(self, frame: np.ndarray | None = None) -> None:
+        """Advance the current waypoint when the vehicle is within its tolerance:
+        the rear axle when poses come, else the maps' vehicle position; ``frame`` the
+        initialUTM that places them (default the maps')."""
         points = self.waypoints.waypoints
-        if not points or self.finished or self.vehicle is None or self.initial_utm is None:
+        frame = self.initial_utm if frame is None else frame
+        if not points or self.finished or frame is None:
+            return
+        if self.axle is not None:
+            vx, vy = self.axle
+        elif self.vehicle is not None:
+            vx, vy = self.vehicle.x, self.vehicle.y
+        else:
             return
         target = points[self.current]
-        x, y = to_local(target, self.initial_utm)
-        if math.hypot(self.vehicle.x - x, self.vehicle.y - y) > target.tolerance:
+        x, y = to_local(target, frame)
+        if math.hypot(vx - x, vy - y) > target.tolerance:
             return
         self.counters["waypoints_reached"] += 1
         if self.current + 1 < len(points):

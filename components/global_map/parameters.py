@@ -31,14 +31,22 @@ class GlobalMapParameters(Parameters):
     InterfaceName: str = param(
         "GlobalMap", unit="-",
         description="afa addition: name the Table 18 planning interface is registered under")
+    PoseEventName: str = param(
+        "Pose", unit="-",
+        description="afa addition: subscribed vehicle pose (PoseTransformIDL): a waypoint "
+                    "is reached when its rear axle comes within the waypoint's tolerance, "
+                    "as Pure Pursuit and FindPath judge it; empty: when the traversability "
+                    "maps' vehicle position (the ground under the front bumper) does")
     Depth: Annotated[int, Field(gt=0)] = param(
         250000, unit="mm",
-        description="afa addition: north-south extent of the planning grid, centred on the "
-                    "start position")
+        description="afa addition: north-south extent of the planning grid, first centred "
+                    "on the start position; it moves to keep the mission inside "
+                    "(decision 0041)")
     Width: Annotated[int, Field(gt=0)] = param(
         250000, unit="mm",
-        description="afa addition: east-west extent of the planning grid, centred on the "
-                    "start position")
+        description="afa addition: east-west extent of the planning grid, first centred "
+                    "on the start position; it moves to keep the mission inside "
+                    "(decision 0041)")
     Gridsize: Annotated[int, Field(gt=0)] = param(
         500, unit="mm",
         description="afa addition: planning cell size (500 mm: one global traversability "

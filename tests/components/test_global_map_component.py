@@ -27,6 +27,7 @@ from idl import (
 from idl import (
     PlanningBoundaryIDL,
     PlanPointIDL,
+    PoseTransformIDL,
     Position3DIDL,
     TimeIDL,
     TravMapArrayEventIDL,
@@ -225,6 +226,45 @@ async def test_waypoints_advance_as_the_vehicle_reaches_them(patrol):
     assert seen[:4] == [course[0], course[1], course[2], course[0] if patrol else None]
     assert seen[4] == (course[1] if patrol else None)
     assert stats["waypoints_reached"] == (4 if patrol else 3)
+
+
+def pose_at(x: float, y: float, utm: np.ndarray = UTM) -> PoseTransformIDL:
+    transform = np.eye(4)
+    transform[:2, 3] = (x, y)
+    return PoseTransformIDL(time=TimeIDL.from_seconds(0.0), HTransform=transform,
+                            initialUTM=utm)
+
+
+async def test_a_waypoint_is_reached_by_the_rear_axle_the_planners_steer():
+    """A waypoint under the vehicle's rear axle is reached, though the maps' vehicle
+    position (the ground under the front bumper, 2.45 m ahead) is beyond its 2 m
+    tolerance: the Global Map judges by the pose, as Pure Pursuit and FindPath steer
+    the rear axle. A pose in another world frame is not used."""
+    course = (waypoint(0.0, 0.0), waypoint(10.0, 0.0))
+    async with rig() as r:
+        g = r.proxy
+        await g.setWaypointList(WaypointGroupIDL(waypoints=course))
+        await r.publish(trav_map(r.clock.now(), scene(), vehicle=(2.45, 0.0)))
+        assert await g.getCurrentWaypoint() == course[0]  # the bumper is 2.45 m away
+        r.system.channel.publish("Raptor", "Pose", pose_at(0.0, 0.0, UTM + 100.0))
+        await r.clock.advance(0.1)
+        assert await g.getCurrentWaypoint() == course[0]  # another frame: not used
+        r.system.channel.publish("Raptor", "Pose", pose_at(0.3, 0.0))
+        await r.clock.advance(0.1)
+        assert await g.getCurrentWaypoint() == course[1]
+    async with rig() as r:  # before the first map: the pose's own frame places them
+        g = r.proxy
+        await g.setWaypointList(WaypointGroupIDL(waypoints=course))
+        r.system.channel.publish("Raptor", "Pose", pose_at(0.3, 0.0))
+        await r.clock.advance(0.1)
+        assert await g.getCurrentWaypoint() == course[1]
+    async with rig(PoseEventName="") as r:  # without poses, the maps' position decides
+        g = r.proxy
+        await g.setWaypointList(WaypointGroupIDL(waypoints=course))
+        await r.publish(trav_map(r.clock.now(), scene(), vehicle=(2.45, 0.0)))
+        r.system.channel.publish("Raptor", "Pose", pose_at(0.3, 0.0))
+        await r.clock.advance(0.1)
+        assert await g.getCurrentWaypoint() == course[0]
 
 
 async def test_the_planning_boundary_is_clipped_and_limits_valid():
