@@ -12,10 +12,10 @@
   (x, y) is cell [x, y]; see :mod:`idl.planning`), and the bulk access of decision 0009
   (``getPlanMap``, ``getPlanMapChanges(revision)``) that FindPath plans from.
 - Keeps the waypoint list (set as Pure Pursuit's is) and the current waypoint: it
-  advances when the vehicle's rear axle (``PoseEventName``, the point Pure Pursuit and
-  FindPath steer) comes within the waypoint's tolerance, and wraps in patrol mode.
-  Without poses (``PoseEventName`` empty, or none yet in the maps' frame), the
-  traversability maps' vehicle position (the ground under the front bumper) decides.
+  advances when the vehicle comes within the waypoint's tolerance, by its rear axle
+  (``PoseEventName``, the point Pure Pursuit and FindPath steer; from the first pose, so
+  a waypoint where the vehicle starts is reached at once) or by the ground under its
+  front bumper (the traversability maps' vehicle position), and wraps in patrol mode.
 - Keeps the mission inside the grid (decision 0041): when the vehicle or the
   waypoints ahead of it come within ``MISSION_MARGIN`` of the grid's edge, the grid
   moves by whole cells (:func:`~components.global_map.accumulate.mission_shift`) to
@@ -195,22 +195,20 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
             self._track_waypoint(np.asarray(pose.initialUTM))
 
     def _track_waypoint(self, frame: np.ndarray | None = None) -> None:
-        """Advance the current waypoint when the vehicle is within its tolerance:
-        the rear axle when poses come, else the maps' vehicle position; ``frame`` the
-        initialUTM that places them (default the maps')."""
+        """Advance the current waypoint when the vehicle is within its tolerance: its
+        rear axle (the latest pose) or the ground under its front bumper (the latest
+        map's vehicle position); ``frame`` the initialUTM that places them (default the
+        maps')."""
         points = self.waypoints.waypoints
         frame = self.initial_utm if frame is None else frame
         if not points or self.finished or frame is None:
             return
-        if self.axle is not None:
-            vx, vy = self.axle
-        elif self.vehicle is not None:
-            vx, vy = self.vehicle.x, self.vehicle.y
-        else:
-            return
+        where = [] if self.axle is None else [self.axle]
+        if self.vehicle is not None and self.initial_utm is not None:
+            where.append((self.vehicle.x, self.vehicle.y))
         target = points[self.current]
         x, y = to_local(target, frame)
-        if math.hypot(vx - x, vy - y) > target.tolerance:
+        if not any(math.hypot(vx - x, vy - y) <= target.tolerance for vx, vy in where):
             return
         self.counters["waypoints_reached"] += 1
         if self.current + 1 < len(points):

@@ -34,9 +34,10 @@ class GlobalMapParameters(Parameters):
     PoseEventName: str = param(
         "Pose", unit="-",
         description="afa addition: subscribed vehicle pose (PoseTransformIDL): a waypoint "
-                    "is reached when its rear axle comes within the waypoint's tolerance, "
-                    "as Pure Pursuit and FindPath judge it; empty: when the traversability "
-                    "maps' vehicle position (the ground under the front bumper) does")
+                    "is reached when the rear axle (the point Pure Pursuit and FindPath "
+                    "steer) or the traversability maps' vehicle position (the ground under "
+                    "the front bumper) comes within its tolerance; empty: the maps' "
+                    "position alone")
     Depth: Annotated[int, Field(gt=0)] = param(
         250000, unit="mm",
         description="afa addition: north-south extent of the planning grid, first centred "
