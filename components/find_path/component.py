@@ -338,11 +338,11 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         return self.grid
 
     def _goal_cell(self, grid: CostGrid, waypoint: WaypointIDL) -> tuple[int, int] | None:
-        """The waypoint's cell, or a passable one within its tolerance (none when it
-        lies outside the operator's planning boundary); for a waypoint beyond the grid,
-        the passable cell nearest it within ``BEYOND_SEARCH`` of the planning limits'
-        point nearest it: the plan leads that way, and the Global Map moves its grid
-        before the vehicle gets there (decision 0041)."""
+        """The waypoint's cell, or a passable one within its tolerance (cells outside
+        the operator's planning boundary are impassable); for a waypoint beyond the
+        grid, the passable cell nearest it within ``BEYOND_SEARCH`` of the planning
+        limits' point nearest it: the plan leads that way, and the Global Map moves its
+        grid before the vehicle gets there (decision 0041)."""
         if not grid.initial_utm.any():  # no map merged yet: no world frame to plan in
             return None
         gx, gy = to_local(waypoint, grid.initial_utm)

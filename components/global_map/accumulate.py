@@ -417,4 +417,3 @@ def mission_shift(geometry: GridGeometry, vehicle: tuple[float, float],
         centre = here + direction * lead
     di, dj = np.round((centre - size / 2 - low_edge) / g).astype(int)
     return (int(di), int(dj))
-

@@ -146,7 +146,7 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
                 self.boundary = self._placed_boundary() or self._whole()
                 self._changed(Region(0, self.grid.geometry.rows, 0, self.grid.geometry.cols))
             self.initial_utm = np.array(body.initialUTM)
-            self.axle = None  # a pose of another frame
+            self.axle = None  # placed in no frame or another: the next pose places it
         self.vehicle = body.vehiclePosition
         self.heading = body.vehicleHeading
         self._keep_mission_inside()
