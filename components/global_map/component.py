@@ -1,8 +1,8 @@
 """The Global Map (seed §3.2.3, Table 18): the cumulative planning map of the mission area.
 
 - Subscribes to the global traversability map (``TraverseEventName``) and merges every
-  one into the planning grid (``Width`` × ``Depth`` at ``Gridsize``, centred on the pose
-  frame's origin, the start; :mod:`components.global_map.accumulate`: an a priori cost
+  one into the planning grid (``Width`` × ``Depth`` at ``Gridsize``, first centred on the
+  pose frame's origin, the start; :mod:`components.global_map.accumulate`: an a priori cost
   layer and a sensed cost layer, cost ≥ 1 for traversable cells and inf for hazards, so
   D* Lite's octile heuristic stays admissible).
 - Publishes ``PlanMapEventName`` (PlanMapEventIDL) after each merge that changed a cost:
