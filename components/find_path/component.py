@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
+from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
@@ -432,7 +432,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         if self._no_path_streak == 1:
             self._no_path_since = self.clock.now()
         if self._no_path_streak >= NO_PATH_UNHEALTHY:  # one detail for the streak: one log
-            since = time.strftime("%H:%M:%S", time.gmtime(self._no_path_since))
+            since = datetime.fromtimestamp(self._no_path_since, UTC).strftime("%H:%M:%S")
             self.set_health(False, f"no path to the waypoint since {since} UTC: every arc "
                                    "vetoed")
         self.path = []
