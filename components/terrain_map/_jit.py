@@ -27,9 +27,9 @@ SIGNATURE = numba.types.UniTuple(numba.int64, 2)(
             boundscheck=False)
 def fuse_kernel(p: np.ndarray, origin_x: float, origin_y: float, gridsize: float, rows: int,
                 cols: int, time: float, assign: bool, window: float, count: np.ndarray,
-                sum_z: np.ndarray, sum_z2: np.ndarray, min_z: np.ndarray, max_z: np.ndarray,
-                last_seen: np.ndarray, gen_min: np.ndarray, gen_max: np.ndarray,
-                gen_start: np.ndarray) -> tuple[int, int]:
+                sum_z: np.ndarray, sum_z2: np.ndarray, last_seen: np.ndarray,
+                prev_min: np.ndarray, prev_max: np.ndarray, gen_min: np.ndarray,
+                gen_max: np.ndarray, gen_start: np.ndarray) -> tuple[int, int]:
     """Fuse the points ``p`` (n, 3) seen at ``time``; ``assign``: every stored time is
     older (set ``last_seen``, else keep the newer); ``window``: the generations' length
     (a new one opens at a point ``window`` or more after the current one's start).
@@ -47,8 +47,8 @@ def fuse_kernel(p: np.ndarray, origin_x: float, origin_y: float, gridsize: float
             sum_z[cell] += z
             sum_z2[cell] += z * z
             if time - gen_start[cell] >= window:  # a new generation: drop the one before
-                min_z[cell] = gen_min[cell]
-                max_z[cell] = gen_max[cell]
+                prev_min[cell] = gen_min[cell]
+                prev_max[cell] = gen_max[cell]
                 gen_min[cell] = math.inf
                 gen_max[cell] = -math.inf
                 gen_start[cell] = time
@@ -56,10 +56,6 @@ def fuse_kernel(p: np.ndarray, origin_x: float, origin_y: float, gridsize: float
             gen_min[cell] = low if low < z else z
             high = gen_max[cell]
             gen_max[cell] = high if high > z else z
-            low = min_z[cell]
-            min_z[cell] = low if low < z else z
-            high = max_z[cell]
-            max_z[cell] = high if high > z else z
             if assign:
                 last_seen[cell] = time
             else:

@@ -276,19 +276,20 @@ class TerrainGrid:
     """A preallocated 2.5-D accumulator grid (see the module doc).
 
     Accumulators are flat float64/int64 arrays of ``rows·cols`` cells (``count``,
-    ``sum_z``, ``sum_z2``, ``min_z``, ``max_z``, ``last_seen``); :meth:`layers` derives
-    the published layers. Empty cells hold count 0, sums 0, min +inf, max -inf and
-    last_seen -inf, so fusion needs no special case for them.
+    ``sum_z``, ``sum_z2``, ``last_seen``, and the extremes of the generations below);
+    :meth:`layers` derives the published layers. Empty cells hold count 0, sums 0,
+    minima +inf, maxima -inf and last_seen -inf, so fusion needs no special case for
+    them.
 
     **Generations** (``window`` seconds; decision 0040). A cell's points fall into
     generations: a point opens a new one when it comes ``window`` seconds or more after
-    the start (first point) of the cell's current generation. ``min_z`` and ``max_z``
-    are the extremes of the current generation and the one before it, so they cover a
-    cell's latest ``window`` to ``2·window`` seconds of observation, however long it has
-    been watched; a cell nobody sees keeps its extremes for ever. ``gen_min``,
-    ``gen_max`` and ``gen_start`` hold the current generation's. Count, sums and
-    ``last_seen`` cover every point. The default ``window`` (infinite) keeps a single
-    generation: extremes over every point.
+    the start (first point) of the cell's current generation. ``gen_min``, ``gen_max``
+    and ``gen_start`` hold the current generation's extremes and start, ``prev_min`` and
+    ``prev_max`` the extremes of the one before; ``min_z`` and ``max_z`` are the extremes
+    of both, so they cover a cell's latest ``window`` to ``2·window`` seconds of
+    observation, however long it has been watched; a cell nobody sees keeps its
+    extremes for ever. Count, sums and ``last_seen`` cover every point. The default
+    ``window`` (infinite) keeps a single generation: extremes over every point.
     """
 
     def __init__(self, geometry: GridGeometry, *, window: float = math.inf) -> None:
@@ -300,9 +301,9 @@ class TerrainGrid:
         self.count = np.zeros(n, dtype=np.int64)
         self.sum_z = np.zeros(n, dtype=np.float64)
         self.sum_z2 = np.zeros(n, dtype=np.float64)
-        self.min_z = np.full(n, np.inf, dtype=np.float64)
-        self.max_z = np.full(n, -np.inf, dtype=np.float64)
         self.last_seen = np.full(n, -np.inf, dtype=np.float64)
+        self.prev_min = np.full(n, np.inf, dtype=np.float64)
+        self.prev_max = np.full(n, -np.inf, dtype=np.float64)
         self.gen_min = np.full(n, np.inf, dtype=np.float64)
         self.gen_max = np.full(n, -np.inf, dtype=np.float64)
         self.gen_start = np.full(n, -np.inf, dtype=np.float64)
@@ -332,11 +333,23 @@ class TerrainGrid:
         """The grid's current placement (changes on :meth:`recentre`)."""
         return self._geometry
 
-    def _accumulators(self) -> tuple[NDArray[Any], ...]:
-        return (self.count, self.sum_z, self.sum_z2, self.min_z, self.max_z, self.last_seen,
-                self.gen_min, self.gen_max, self.gen_start)
+    @property
+    def min_z(self) -> FloatArray:
+        """Each cell's least height over its last two generations (+inf where empty)."""
+        result: FloatArray = np.minimum(self.prev_min, self.gen_min)
+        return result
 
-    _EMPTY = (0, 0.0, 0.0, np.inf, -np.inf, -np.inf, np.inf, -np.inf, -np.inf)
+    @property
+    def max_z(self) -> FloatArray:
+        """Each cell's greatest height over its last two generations (-inf where empty)."""
+        result: FloatArray = np.maximum(self.prev_max, self.gen_max)
+        return result
+
+    def _accumulators(self) -> tuple[NDArray[Any], ...]:
+        return (self.count, self.sum_z, self.sum_z2, self.last_seen, self.prev_min,
+                self.prev_max, self.gen_min, self.gen_max, self.gen_start)
+
+    _EMPTY = (0, 0.0, 0.0, -np.inf, np.inf, -np.inf, np.inf, -np.inf, -np.inf)
 
     def reset(self) -> None:
         """Forget every point, in place (no allocation)."""
@@ -390,8 +403,8 @@ class TerrainGrid:
             fused, nonfinite = FUSE_KERNEL(
                 np.ascontiguousarray(p), float(geo.origin_x), float(geo.origin_y),
                 float(geo.gridsize), int(geo.rows), int(geo.cols), float(time), assign,
-                self.window, self.count, self.sum_z, self.sum_z2, self.min_z, self.max_z,
-                self.last_seen, self.gen_min, self.gen_max, self.gen_start)
+                self.window, self.count, self.sum_z, self.sum_z2, self.last_seen,
+                self.prev_min, self.prev_max, self.gen_min, self.gen_max, self.gen_start)
             if fused and assign:
                 self._newest = time
             return int(fused), int(nonfinite)
@@ -435,19 +448,17 @@ class TerrainGrid:
             np.add.at(self.sum_z, flat, zs)
             np.add.at(self.sum_z2, flat, np.multiply(zs, zs, out=low[:fused]))
             # A cell opens a new generation at its first point here when its current one
-            # began `window` or more before `time`: the one before is then dropped (its
-            # extremes leave min_z/max_z), the current one becomes the one before.
+            # began `window` or more before `time`: the one before is then dropped, the
+            # current one becomes the one before.
             opening = flat[time - self.gen_start.take(flat) >= self.window]
             if opening.size:
-                self.min_z[opening] = self.gen_min[opening]
-                self.max_z[opening] = self.gen_max[opening]
+                self.prev_min[opening] = self.gen_min[opening]
+                self.prev_max[opening] = self.gen_max[opening]
                 self.gen_min[opening] = np.inf
                 self.gen_max[opening] = -np.inf
                 self.gen_start[opening] = time
             np.minimum.at(self.gen_min, flat, zs)
             np.maximum.at(self.gen_max, flat, zs)
-            np.minimum.at(self.min_z, flat, zs)
-            np.maximum.at(self.max_z, flat, zs)
             if time >= self._newest:  # every stored time is older: plain assignment
                 self.last_seen[flat] = time
                 self._newest = time

@@ -293,11 +293,11 @@ def test_layers_and_float64_variance() -> None:
 
 def test_reset_is_in_place() -> None:
     grid = TerrainGrid.centred(0, 0, 4, 4, 0.5)
-    arrays = [grid.count, grid.sum_z, grid.min_z, grid.last_seen]
+    arrays = grid._accumulators()  # every stored array (min_z and max_z derive from them)
     grid.fuse(np.random.default_rng(0).uniform(-2, 2, (50, 3)), 1.0)
     grid.reset()
-    assert [id(a) for a in arrays] == [id(grid.count), id(grid.sum_z), id(grid.min_z),
-                                       id(grid.last_seen)]
+    assert [id(a) for a in arrays] == [id(a) for a in grid._accumulators()]
+    assert len(arrays) == 9
     assert grid.count.sum() == 0 and np.all(grid.min_z == np.inf)
     assert np.all(grid.max_z == -np.inf) and np.all(grid.last_seen == -np.inf)
 
