@@ -163,9 +163,13 @@ class CostGrid:
         assumed: np.ndarray = np.maximum(self.a_priori[area], self.prior)
         return assumed
 
+    def index(self, x: float, y: float) -> tuple[int, int]:
+        """The cell (i, j) holding world point (x, y), inside the grid or not."""
+        return (int(math.floor((x - self.origin[0]) / self.gridsize)),
+                int(math.floor((y - self.origin[1]) / self.gridsize)))
+
     def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
-        i = int(math.floor((x - self.origin[0]) / self.gridsize))
-        j = int(math.floor((y - self.origin[1]) / self.gridsize))
+        i, j = self.index(x, y)
         if 0 <= i < self.shape[0] and 0 <= j < self.shape[1]:
             return i, j
         return None
@@ -351,8 +355,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         if cell is not None:
             return grid.free_near(cell, waypoint.tolerance / grid.gridsize)
         b = grid.boundary
-        i = math.floor((gx - grid.origin[0]) / grid.gridsize)
-        j = math.floor((gy - grid.origin[1]) / grid.gridsize)
+        i, j = grid.index(gx, gy)
         nearest = (min(max(i, b.minX), b.maxX), min(max(j, b.minY), b.maxY))
         return grid.free_near(nearest, BEYOND_SEARCH / grid.gridsize)
 
