@@ -79,7 +79,8 @@ log = logging.getLogger("afa.sim")
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 DEFAULT_WORLD = CONFIGS / "worlds" / "open-field.xml"
 VEHICLE_FRAME = "Raptor:RearAxleCenter"
-#: A waypoint counts as reached when the rear axle passes within this distance (m).
+#: A waypoint counts as reached when the rear axle or the middle of the front bumper (the
+#: points the Global Map and the behaviours judge by) passes within this distance (m).
 WAYPOINT_TOLERANCE = 3.0
 #: The mission area given to the Global Map: the terrain less this margin (m).
 GEOFENCE_MARGIN = 1.0
@@ -561,17 +562,25 @@ class RaptorSimulation:
         if not waypoints or self._next_waypoint >= len(waypoints):
             return
         target = waypoints[self._next_waypoint]
-        distance = math.hypot(self.state.east - target.east, self.state.north - target.north)
+        state = self.state
+        p = self.vehicle.parameters
+        front = p.body_length - p.rear_overhang
+        bumper = (state.east + front * math.cos(state.yaw),
+                  state.north + front * math.sin(state.yaw))
+        distance = min(math.hypot(state.east - target.east, state.north - target.north),
+                       math.hypot(bumper[0] - target.east, bumper[1] - target.north))
         if distance <= WAYPOINT_TOLERANCE:
+            # a patrol needs two waypoints: with one it is a plain mission, as the
+            # vehicle's Pure Pursuit and Global Map take it
+            patrol = self.world.mission.patrol and len(waypoints) >= 2
             self.waypoints_reached += 1
             self._next_waypoint += 1
             if self.waypoints_reached == len(waypoints):  # the course (one lap) is done
                 self.mission_complete_time = self.sim_time
                 self.mission_distance = self.state.distance
-            if self.world.mission.patrol:
+            if patrol:
                 self._next_waypoint %= len(waypoints)
-            if self.waypoints_reached == len(waypoints) + (1 if self.world.mission.patrol
-                                                           else 0):
+            if self.waypoints_reached == len(waypoints) + (1 if patrol else 0):
                 self.finished.set()
 
     def _track_clearance(self) -> None:

@@ -64,7 +64,8 @@ def search_kernel(distance: np.ndarray, inv: float, window_cost: np.ndarray,
                   bins: int, max_expansions: int, poses: np.ndarray, parents: np.ndarray,
                   kappas: np.ndarray) -> tuple[int, int, int]:
     """Run the search; ``start`` is (x, y, h, curvature or NaN, need, escape_from,
-    escape_rate), ``target`` (x, y, h, has heading), ``kappa_scale`` the largest
+    escape_rate), ``target`` (x, y, h, has heading, then the arrival region: x, y,
+    radius squared (negative for none), ahead, left), ``kappa_scale`` the largest
     curvature magnitude (the change cost's scale). ``poses`` (n, 3), ``parents`` and
     ``kappas`` (n) receive the states, n at least ``max_expansions`` × motions + 1.
     Returns (the goal state's index or -1, expansions, states used)."""
@@ -79,6 +80,7 @@ def search_kernel(distance: np.ndarray, inv: float, window_cost: np.ndarray,
     bin_width = 2.0 * math.pi / bins
     need, escape_from, escape_rate = start[4], start[5], start[6]
     tx, ty, th, has_heading = target[0], target[1], target[2], target[3] != 0.0
+    wx, wy, r2, ahead, left = target[4], target[5], target[6], target[7], target[8]
     scale = max(abs(kappa_scale), 1e-9)
 
     poses[0, 0], poses[0, 1], poses[0, 2] = start[0], start[1], start[2]
@@ -126,10 +128,14 @@ def search_kernel(distance: np.ndarray, inv: float, window_cost: np.ndarray,
             continue
         closed[state] = True
         expansions += 1
-        if (x - tx) ** 2 + (y - ty) ** 2 <= tol2 and (
-                not has_heading or abs(_wrap(h - th)) <= heading_tolerance):
-            return n, expansions, count
         c, s = math.cos(h), math.sin(h)
+        if (x - tx) ** 2 + (y - ty) ** 2 <= tol2 and (
+                not has_heading or abs(_wrap(h - th)) <= heading_tolerance) or (
+                n > 0 and r2 >= 0.0 and (
+                    (x - wx) ** 2 + (y - wy) ** 2 <= r2
+                    or (x + ahead * c - left * s - wx) ** 2
+                    + (y + ahead * s + left * c - wy) ** 2 <= r2)):
+            return n, expansions, count
         required = min(need, escape_from - 0.05 + escape_rate * travel[n])
         for m in range(n_motions):
             kappa = kappas_of_motions[m]

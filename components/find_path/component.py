@@ -22,8 +22,11 @@ runs one cycle every ``PlanEventInterval`` seconds:
    scratch, as the seed's "forced to re-plan";
 5. a drivable path (:mod:`components.find_path.kinematic`, decision 0024): forward arcs
    within the arc set's curvature, the body as discs, from the vehicle to the D* path's
-   point ``RefineDistance`` ahead; the vote is a narrow Gaussian around the curvature
-   that reaches its point 1.5 m ahead (κ = 2y/D²). When there is none (the vehicle
+   point ``RefineDistance`` ahead (where that is the waypoint, a path ends with the rear
+   axle near it, or with the ground under the bumper, ``GroundFrame`` from ModelServer,
+   where the rear axle cannot come: the Global Map's arrival rule, decision 0042); the
+   vote is a narrow Gaussian around the curvature that reaches its point 1.5 m ahead
+   (κ = 2y/D²). When there is none (the vehicle
    stands where no forward path leads onto the plan) every arc is vetoed and the
    arbiter backs out. With refinement off (``RefineDistance`` 0) the look-ahead point is
    the farthest point of the D* path between ``MinLookahead`` and ``MaxLookahead`` cells
@@ -47,7 +50,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from afa import SubscribePublishServer
+from afa import EOutOfBounds, SubscribePublishServer
 from afa.diagnostics import Stopwatch
 from afa.errors import AfaError
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
@@ -70,6 +73,11 @@ NO_PATH_UNHEALTHY = 5
 #: For a waypoint beyond the map, how far (m) from the limits' point nearest it a
 #: passable cell may be taken as the goal.
 BEYOND_SEARCH = 10.0
+#: A drivable path to the waypoint ends with the rear axle or the bumper's ground point
+#: within this share of the waypoint's tolerance (the rest absorbs tracking error).
+ARRIVAL_SHARE = 0.75
+#: The frame of the pose ModelServer serves (GroundFrame's place is asked relative to it).
+VEHICLE_FRAME = "Raptor:RearAxleCenter"
 
 
 class CostGrid:
@@ -220,10 +228,15 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.counters = {"cycles": 0, "plans": 0, "replans": 0, "tracking_replans": 0,
                          "prior_changes": 0,
                          "no_path": 0, "cells_updated": 0, "poll_errors": 0,
-                         "refined": 0, "undrivable": 0, "invalid_poses": 0}
+                         "refined": 0, "undrivable": 0, "invalid_poses": 0,
+                         "unknown_frames": 0, "bumper_arrivals": 0}
         self._no_path_streak = 0  # planning cycles in a row that found no path
         self._no_path_since = 0.0  # when the streak began (clock time)
         self.beyond = False  # the waypoint lies beyond the planning limits
+        self.waypoint: tuple[float, float, float] | None = None  # x, y, tolerance (m)
+        #: where GroundFrame sits on the vehicle (ahead, left of the rear axle, m): None
+        #: until ModelServer answers, False when it does not know the frame
+        self.front: tuple[float, float] | bool | None = None
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
@@ -233,6 +246,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.goal = None
         self.path = []
         self._no_path_streak = 0
+        self.front = None
 
     async def run(self) -> None:
         p = self.parameters
@@ -262,16 +276,27 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         start = grid.cell_of(x, y)
         goal = self._goal_cell(grid, waypoint)
         if start is None or goal is None:
-            self._no_path(grid, waypoint)
+            if start is None:
+                reason = "the vehicle is off the map"
+            elif not grid.initial_utm.any():
+                reason = "no map merged yet"
+            elif self.beyond:
+                reason = "no passable cell on the map's edge towards it"
+            else:
+                reason = "it lies in an obstacle: no passable cell within its tolerance"
+            self._no_path(grid, waypoint, reason)
             return
         with Stopwatch() as watch:  # processing time, for statistics only
             status = self._plan(grid, start, goal)
         self.plan_times.append(watch.seconds)
         del self.plan_times[:-1000]
         if status is not PlanStatus.DONE or self.planner is None:
-            self._no_path(grid, waypoint)
+            self._no_path(grid, waypoint, "no route reaches it" if status is
+                          PlanStatus.NO_PATH else "the search ran out of its budget")
             return
         self.path = self.planner.path()
+        if self.front is None:
+            await self._front_point()
         with Stopwatch() as watch:
             self.refined, undrivable = self._refine(grid, (x, y, yaw))
         self.refine_times.append(watch.seconds)
@@ -308,6 +333,10 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         if not pose.poseValidFlag:
             self.set_health(False, "planning from a pose marked invalid (poseValidFlag "
                                    "false)")
+        elif self.front is False:
+            self.set_health(False, f"ModelServer does not know GroundFrame "
+                                   f"{self.parameters.GroundFrame!r}: a path to the "
+                                   "waypoint must bring the rear axle to it")
         elif undrivable:
             self.set_health(True, "no drivable way onto the plan from here: backing out")
         else:
@@ -350,6 +379,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         if not grid.initial_utm.any():  # no map merged yet: no world frame to plan in
             return None
         gx, gy = to_local(waypoint, grid.initial_utm)
+        self.waypoint = (gx, gy, waypoint.tolerance)
         cell = grid.cell_of(gx, gy)
         self.beyond = cell is None
         if cell is not None:
@@ -385,9 +415,11 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
                 ) -> tuple[Refined | None, bool]:
         """A drivable path (:mod:`components.find_path.kinematic`) from the vehicle to
         the D* path's point ``RefineDistance`` ahead (its end if nearer), in any heading:
-        beyond a gate, the gate aligns it. Returns the path, and whether the search
-        found none (the vehicle must back out first); (None, False) when refinement is
-        off or the path is a single cell."""
+        beyond a gate, the gate aligns it. Where that is the path's end, the waypoint's
+        cell, the path ends where the Global Map counts the waypoint reached
+        (:meth:`_to_waypoint`). Returns the path, and whether the search found none (the
+        vehicle must back out first); (None, False) when refinement is off or the path
+        is a single cell."""
         p = self.parameters
         if p.RefineDistance <= 0.0 or len(self.path) < 2:
             return None, False
@@ -402,11 +434,56 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         # The body discs keep the refined path clear; the cells D* leaves out for the
         # rear axle (within InflationRadius) are open to it at twice the margin's cost,
         # so it may pass closer than D* would, where the body fits (a slalom's gap).
-        refined = self._refiner.plan(grid.blocked, grid.cost, grid.origin, grid.gridsize,
-                                     pose, (*centres[k], None), curvature=self._steering,
-                                     open_cost=2.0 * p.MarginCost)
+        def search(arrival: tuple[float, float, float, float, float] | None
+                   ) -> Refined | None:
+            assert self._refiner is not None
+            return self._refiner.plan(grid.blocked, grid.cost, grid.origin, grid.gridsize,
+                                      pose, (*centres[k], None), curvature=self._steering,
+                                      open_cost=2.0 * p.MarginCost, arrival=arrival)
+
+        if k + 1 < len(centres) or self.beyond or self.waypoint is None:
+            refined = search(None)
+        else:
+            refined = self._to_waypoint(search, *self.waypoint)
         self.counters["refined" if refined is not None else "undrivable"] += 1
         return refined, refined is None
+
+    def _to_waypoint(self, search: Any, x: float, y: float, tolerance: float
+                     ) -> Refined | None:
+        """The drivable path to the waypoint (decision 0042): the rear axle within
+        ``ARRIVAL_SHARE`` of its tolerance, the point the arcs turn about, so the vehicle
+        passes a waypoint where the next leg turns away without first pointing at it;
+        unless the rear axle cannot come there, or only by a detour longer than the body
+        (a waypoint short of a wall it faces): then the bumper's ground point."""
+        radius = ARRIVAL_SHARE * tolerance
+        rear = search((x, y, radius, 0.0, 0.0))
+        if not isinstance(self.front, tuple) or self.front == (0.0, 0.0):
+            return rear
+        ahead, left = self.front
+        front = search((x, y, radius, ahead, left))
+        if front is None or (rear is not None and len(rear.poses) * rear.step
+                             <= len(front.poses) * front.step + abs(ahead) + rear.step):
+            return rear
+        self.counters["bumper_arrivals"] += 1
+        return front
+
+    async def _front_point(self) -> None:
+        """Where ``GroundFrame`` sits on the vehicle, from ModelServer (polled until it
+        answers; a frame it does not know leaves the rear axle as the only arrival
+        point, and the component unhealthy: its health names the frame)."""
+        frame = self.parameters.GroundFrame
+        try:
+            transform = await self.platform.getTransformation(VEHICLE_FRAME, frame)
+        except EOutOfBounds as exc:
+            self.log.warning("%s: ModelServer does not know the frame %r (%s): arrival "
+                             "is judged by the rear axle only", self.name, frame, exc)
+            self.front = False
+            self.counters["unknown_frames"] += 1
+            return
+        except AfaError:
+            return  # not reachable yet: the next cycle asks again
+        h = np.asarray(transform.HTransform, dtype=np.float64)
+        self.front = (float(h[0, 3]), float(h[1, 3]))
 
     def _lookahead(self, points: list[tuple[float, float]], vehicle: tuple[float, float],
                    gridsize: float) -> tuple[float, float]:
@@ -428,16 +505,17 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             chosen = points[k]
         return chosen
 
-    def _no_path(self, grid: CostGrid, waypoint: WaypointIDL) -> None:
-        """Veto every arc, and publish the empty path (displays drop the old one)."""
+    def _no_path(self, grid: CostGrid, waypoint: WaypointIDL, reason: str) -> None:
+        """Veto every arc, and publish the empty path (displays drop the old one);
+        ``reason`` goes in the health detail."""
         self.counters["no_path"] += 1
         self._no_path_streak += 1
         if self._no_path_streak == 1:
             self._no_path_since = self.clock.now()
         if self._no_path_streak >= NO_PATH_UNHEALTHY:  # one detail for the streak: one log
             since = datetime.fromtimestamp(self._no_path_since, UTC).strftime("%H:%M:%S")
-            self.set_health(False, f"no path to the waypoint since {since} UTC: every arc "
-                                   "vetoed")
+            self.set_health(False, f"no path to the waypoint since {since} UTC, {reason}: "
+                                   "every arc vetoed")
         self.path = []
         stamp = TimeIDL.from_seconds(self.clock.now())
         self.votes.publish(ArcVotes.halt(len(self.arcs)).to_idl(

@@ -36,7 +36,11 @@ merged by cell and heading bin):
   search round them rather than into them; it ignores the turning radius, so it never
   overestimates by much.
 - **Goal**: within ``position_tolerance`` of the target and, when the target has a
-  heading, within ``heading_tolerance`` of it.
+  heading, within ``heading_tolerance`` of it; or, when the target is the waypoint
+  (an ``arrival`` region), a pose after the first motion whose rear axle or front point
+  (the ground under the bumper, where the Global Map also judges arrival) lies within
+  the region: the rear axle cannot stand on a waypoint short of a wall facing it, but
+  the bumper can come to it.
 
 The search is confined to a window around start and target and stops after
 ``max_expansions`` states: it answers ``None`` then, and FindPath tracks the D* path as
@@ -144,7 +148,8 @@ class Refiner:
     def plan(self, blocked: NDArray[np.bool_], cost: NDArray[np.float64],
              origin: tuple[float, float], gridsize: float, start: Pose,
              target: tuple[float, float, float | None],
-             curvature: float | None = None, open_cost: float | None = None
+             curvature: float | None = None, open_cost: float | None = None,
+             arrival: tuple[float, float, float, float, float] | None = None
              ) -> Refined | None:
         """A drivable path from ``start`` to ``target`` (x, y, heading or None), or None
         when the search finds none within its window and budget.
@@ -155,8 +160,11 @@ class Refiner:
         the first motion pays for changing it like every other (a path that starts by
         flicking the steering the other way makes the vehicle weave); ``open_cost``: the
         cost of a cell that ``cost`` closes (inf) but ``blocked`` does not (grown for a
-        point, where the discs decide what fits), None to keep it closed. Only the
-        search's window of either array is read.
+        point, where the discs decide what fits), None to keep it closed;
+        ``arrival``: (x, y, radius, ahead, left), a waypoint reached when the rear axle or
+        the point ``ahead``, ``left`` of it in the vehicle frame comes within ``radius``
+        (tested from the first motion on). Only the search's window of either array is
+        read.
         """
         g = gridsize
         shape = blocked.shape
@@ -216,7 +224,8 @@ class Refiner:
 
         if self.kernel is not None:
             return self._search_compiled(distances, fine, window_cost, togo, (ox, oy), g,
-                                         start, target, curvature, float(escape_from))
+                                         start, target, curvature, float(escape_from),
+                                         arrival)
         table = distances.tolist()  # plain floats index faster than an array
         tx, ty, th = target
         tol2 = self.position_tolerance ** 2
@@ -243,10 +252,11 @@ class Refiner:
                 continue
             closed.add(k_n)
             expansions += 1
-            if (x - tx) ** 2 + (y - ty) ** 2 <= tol2 and (
-                    th is None or abs(_wrap(h - th)) <= self.heading_tolerance):
-                return self._path(poses, parents, kappas, n, expansions, self.step)
             c, s = math.cos(h), math.sin(h)
+            if (x - tx) ** 2 + (y - ty) ** 2 <= tol2 and (
+                    th is None or abs(_wrap(h - th)) <= self.heading_tolerance) or (
+                    n > 0 and arrival is not None and _arrived(arrival, x, y, c, s)):
+                return self._path(poses, parents, kappas, n, expansions, self.step)
             required = min(need, escape_from - 0.05 + escape_rate * travel[n])
             for kappa, samples in self._motions:
                 ok = True
@@ -289,7 +299,9 @@ class Refiner:
                          window_cost: NDArray[np.float64], togo: NDArray[np.float64],
                          corner: tuple[float, float], g: float, start: Pose,
                          target: tuple[float, float, float | None], curvature: float | None,
-                         escape_from: float) -> Refined | None:
+                         escape_from: float,
+                         arrival: tuple[float, float, float, float, float] | None
+                         ) -> Refined | None:
         """:meth:`plan`'s search by the compiled kernel (``components/find_path/
         _search_jit.py``): the same states in the same order, the same path."""
         capacity = self.max_expansions * len(self._motions) + 1
@@ -307,7 +319,9 @@ class Refiner:
                       math.nan if curvature is None else float(curvature), self.need,
                       escape_from, self.escape_rate]),
             np.array([target[0], target[1], 0.0 if th is None else th,
-                      0.0 if th is None else 1.0]),
+                      0.0 if th is None else 1.0,
+                      *((arrival[0], arrival[1], arrival[2] ** 2, arrival[3], arrival[4])
+                        if arrival is not None else (0.0, 0.0, -1.0, 0.0, 0.0))]),
             self.curvatures[0], self.position_tolerance ** 2, self.heading_tolerance,
             self.curvature_change_cost, self.step, self.bins, self.max_expansions,
             poses, parents, kappas)
@@ -365,6 +379,17 @@ def _arc(kappa: float, s: float) -> tuple[float, float]:
     if abs(kappa) < 1e-12:
         return (s, 0.0)
     return (math.sin(kappa * s) / kappa, (1.0 - math.cos(kappa * s)) / kappa)
+
+
+def _arrived(arrival: tuple[float, float, float, float, float], x: float, y: float,
+             c: float, s: float) -> bool:
+    """Whether the rear axle at (x, y), heading (cos, sin) = (c, s), or the point
+    ``arrival[3:]`` ahead and left of it lies within ``arrival[2]`` of ``arrival[:2]``."""
+    ax, ay, radius, ahead, left = arrival
+    r2 = radius * radius
+    return ((x - ax) ** 2 + (y - ay) ** 2 <= r2
+            or (x + ahead * c - left * s - ax) ** 2 + (y + ahead * s + left * c - ay) ** 2
+            <= r2)
 
 
 def _wrap(angle: float) -> float:

@@ -78,6 +78,13 @@ class FindPathParameters(Parameters):
         description="afa addition: where along the body (m ahead of the rear axle) the "
                     "refinement checks a disc of DiscRadius for obstacles; together they "
                     "cover the body from bumper to bumper")
+    GroundFrame: str = param(
+        "Raptor: Front-BumperCenter", unit="-",
+        description="afa addition: the frame on the ground under the front bumper "
+                    "(ModelServer's geometry), where the Global Map also judges a "
+                    "waypoint reached: where the rear axle cannot come near the waypoint "
+                    "(short of a wall it faces), a drivable path to it ends with this "
+                    "point within its tolerance")
     DiscRadius: Annotated[float, Field(gt=0)] = param(
         0.81, unit="m",
         description="afa addition: the radius of the refinement's body discs: with discs "

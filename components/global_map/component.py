@@ -15,7 +15,8 @@
   advances when the vehicle comes within the waypoint's tolerance, by its rear axle
   (``PoseEventName``, the point Pure Pursuit and FindPath steer; from the first pose, so
   a waypoint where the vehicle starts is reached at once) or by the ground under its
-  front bumper (the traversability maps' vehicle position), and wraps in patrol mode.
+  front bumper (the traversability maps' vehicle position), and wraps in patrol mode
+  (a patrol needs two waypoints: with one it finishes, as Pure Pursuit's does).
 - Keeps the mission inside the grid (decision 0041): when the vehicle or the
   waypoints ahead of it come within ``MISSION_MARGIN`` of the grid's edge, the grid
   moves by whole cells (:func:`~components.global_map.accumulate.mission_shift`) to
@@ -213,9 +214,9 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
         self.counters["waypoints_reached"] += 1
         if self.current + 1 < len(points):
             self.current += 1
-        elif self.waypoints.patrolMode:
+        elif self.waypoints.patrolMode and len(points) >= 2:
             self.current = 0
-        else:
+        else:  # the last one; a patrol of one waypoint finishes too, as Pure Pursuit's
             self.finished = True
 
     def _waypoints_in(self, frame: np.ndarray) -> list[tuple[float, float]]:
@@ -323,7 +324,8 @@ class GlobalMap(SubscribePublishServer[GlobalMapParameters]):
             if (point.latitude, point.longitude) == (current.latitude, current.longitude):
                 if index + 1 < len(points):
                     return points[index + 1]
-                return points[0] if self.waypoints.patrolMode else None
+                return points[0] if self.waypoints.patrolMode and len(points) >= 2 \
+                    else None
         return None
 
     async def setWaypointList(self, waypoints: WaypointGroupIDL) -> None:

@@ -10,6 +10,11 @@ waypoints, voting for arcs as a Gaussian around the pursuit arc.
   (:mod:`components.waypoints`) when the first pose arrives (and again, keeping the
   progress, if the pose frame's origin changes); ``setHalt(true)`` vetoes every arc until
   ``setHalt(false)``; after the last waypoint of a non-patrol list it votes to stop.
+- A waypoint is reached when the rear axle or the ground under the front bumper comes
+  within its tolerance, as the Global Map judges it: where that ground point
+  (``GroundFrame``) lies on the vehicle it asks ModelServer (``getTransformation``,
+  ``PlatformName``) until it answers; a frame ModelServer does not know leaves the rear
+  axle alone, and the component unhealthy, its detail naming the frame.
 - Before the first pose, or with no waypoints, it votes to stop (speed 0 on every arc):
   a vote that keeps the arbiter informed rather than silent.
 """
@@ -19,19 +24,30 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from afa import Event, SubscribePublishServer
+from afa import EOutOfBounds, Event, SubscribePublishServer
+from afa.errors import AfaError
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
 from components.pure_pursuit.parameters import PurePursuitParameters
 from components.pure_pursuit.pursuit import PurePursuit as PursuitCore
 from components.pure_pursuit.pursuit import PursuitOutput, PursuitSettings, Waypoint
 from components.waypoints import to_local
-from idl import ArcVoteIDL, PoseTransformIDL, TimeIDL, VehiclePlan, WaypointGroupIDL, WaypointIDL
+from idl import (
+    ArcVoteIDL,
+    Platform,
+    PoseTransformIDL,
+    TimeIDL,
+    VehiclePlan,
+    WaypointGroupIDL,
+    WaypointIDL,
+)
 
 __all__ = ["PurePursuit", "BEHAVIOUR", "VOTE_PERIOD"]
 
 BEHAVIOUR = "PurePursuit"
 #: Table 22: Pure Pursuit votes every 100 ms.
 VOTE_PERIOD = 0.1
+#: The frame of the pose ModelServer publishes (GroundFrame's place is asked relative to it).
+VEHICLE_FRAME = "Raptor:RearAxleCenter"
 
 
 class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
@@ -44,6 +60,7 @@ class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
         self.subscribes(p.PoseEventName, PoseTransformIDL, self._on_pose, maxsize=4,
                         required=True)
         self.serves(VehiclePlan, p.InterfaceName)
+        self.platform = self.uses(Platform, p.PlatformName)
         self.arcs = ArcSet.from_parameters()
         self.settings = PursuitSettings.from_parameters(p)
         self.core = PursuitCore(self.arcs, self.settings)
@@ -51,7 +68,11 @@ class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
         self.pose: PoseTransformIDL | None = None
         self.last: PursuitOutput | None = None
         self._origin: tuple[float, float] | None = None  # initialUTM the list is in
-        self.counters = {"votes": 0, "waypoints_reached": 0, "invalid_poses": 0}
+        #: whether ModelServer has answered where GroundFrame lies (True, or False when
+        #: it does not know the frame); None until then
+        self.front_known: bool | None = None
+        self.counters = {"votes": 0, "waypoints_reached": 0, "invalid_poses": 0,
+                         "unknown_frames": 0}
 
     async def setup(self) -> None:
         arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
@@ -60,12 +81,38 @@ class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
             core = PursuitCore(arcs, self.settings)
             core.set_patrol(self.core.patrol)
             core.set_halt(self.core.halted)
+            core.set_front(*self.core.front)
             self.core = core
             self._origin = None
 
     async def run(self) -> None:
+        self.spawn(self._front_point(), f"{self.name}:geometry")
         async for _ in self.clock.periodic(VOTE_PERIOD):
             self._vote()
+
+    async def _front_point(self) -> None:
+        """Where ``GroundFrame`` lies on the vehicle, from ModelServer (module
+        docstring): asked once a vote period until it answers, beside the votes (a slow
+        answer never delays one)."""
+        frame = self.parameters.GroundFrame
+        while self.front_known is None:
+            try:
+                transform = await self.platform.getTransformation(VEHICLE_FRAME, frame)
+            except EOutOfBounds as exc:
+                self.log.warning("%s: ModelServer does not know the frame %r (%s): "
+                                 "waypoints are reached by the rear axle only", self.name,
+                                 frame, exc)
+                self.front_known = False
+                self.counters["unknown_frames"] += 1
+                self.set_health(False, f"ModelServer does not know GroundFrame {frame!r}: "
+                                       "waypoints are reached by the rear axle only")
+                return
+            except AfaError:
+                await self.clock.sleep(VOTE_PERIOD)  # not reachable yet: ask again
+                continue
+            h = transform.HTransform
+            self.core.set_front(float(h[0, 3]), float(h[1, 3]))
+            self.front_known = True
 
     def _on_pose(self, event: Event) -> None:
         pose: PoseTransformIDL = event.body  # type: ignore[assignment]

@@ -31,6 +31,15 @@ class PurePursuitParameters(Parameters):
         "PurePursuit", unit="-",
         description="afa addition: name the VehiclePlan waypoint interface (Table 24) is "
                     "registered under")
+    PlatformName: str = param(
+        "ModelService", unit="-",
+        description="afa addition: name ModelServer's Platform interface is offered under "
+                    "(asked once where GroundFrame lies on the vehicle)")
+    GroundFrame: str = param(
+        "Raptor: Front-BumperCenter", unit="-",
+        description="afa addition: the frame on the ground under the front bumper: a "
+                    "waypoint is reached when the rear axle or this point comes within "
+                    "its tolerance, as the Global Map and FindPath judge it")
     Lookahead: Annotated[float, Field(gt=0)] = param(
         5.0, unit="m",
         description="afa addition: lookahead distance along the path to the goal point "

@@ -45,9 +45,12 @@ gives κ* = 0.
 Waypoint advance
 ----------------
 The target advances (to the next waypoint, or to w0 after w_last on patrol; several in
-one update if need be) when the vehicle is within the target's tolerance: the one rule
+one update if need be) when the vehicle is within the target's tolerance: its rear axle
+or its *front point* (:meth:`PurePursuit.set_front`: the ground under the front bumper,
+``ahead``, ``left`` of the rear axle; the rear axle itself until set). That is the rule
 the Global Map (which FindPath plans to) uses too, so the behaviours never disagree on
-the waypoint sought. Past the target's perpendicular without having reached it (a
+the waypoint sought: a waypoint short of a wall, which the rear axle cannot reach facing
+it, is reached by the bumper. Past the target's perpendicular without having reached it (a
 detour round an obstacle), the look-ahead point becomes the waypoint itself and the
 vehicle turns back to it rather than skipping it. After the last waypoint of a
 non-patrol list the behaviour is *finished*. Patrol needs at least two waypoints; with
@@ -229,6 +232,7 @@ class PurePursuit:
         self._target = 0
         self._previous: tuple[float, float] | None = None  # start of the current segment
         self._finished = False
+        self._front = (0.0, 0.0)  # the front point, ahead and left of the rear axle (m)
         curvatures = np.abs(arcs.curvatures)
         with np.errstate(divide="ignore"):
             turn_limit = np.sqrt(self.settings.max_lateral_acceleration / curvatures)
@@ -289,6 +293,18 @@ class PurePursuit:
         self._halt = halt
 
     @property
+    def front(self) -> tuple[float, float]:
+        """The front point (ahead, left of the rear axle, m) that reaches waypoints too."""
+        return self._front
+
+    def set_front(self, ahead: float, left: float = 0.0) -> None:
+        """Where the front point lies on the vehicle (module docstring, Waypoint
+        advance). Raises ValueError for a non-finite offset."""
+        if not (math.isfinite(ahead) and math.isfinite(left)):
+            raise ValueError(f"front point ({ahead}, {left}) is not finite")
+        self._front = (float(ahead), float(left))
+
+    @property
     def finished(self) -> bool:
         """True after the last waypoint of a non-patrol list."""
         return self._finished
@@ -296,7 +312,7 @@ class PurePursuit:
     # --- one update --------------------------------------------------------------------
 
     def update(self, x: float, y: float, yaw: float) -> PursuitOutput:
-        """Advance the target if the vehicle at (x, y, yaw) reached or passed it, and vote.
+        """Advance the target if the vehicle at (x, y, yaw) reached it, and vote.
 
         Raises ValueError for a non-finite pose.
         """
@@ -308,7 +324,7 @@ class PurePursuit:
             return PursuitOutput(self._stop_votes, "idle", math.nan, None, None, 0.0)
         if self._previous is None:
             self._previous = (x, y)
-        advanced = self._advance(x, y)
+        advanced = self._advance(x, y, yaw)
         if self._finished:
             return PursuitOutput(self._stop_votes, "finished", math.nan, None, None, 0.0,
                                  advanced)
@@ -332,14 +348,19 @@ class PurePursuit:
         w = self._waypoints[target]
         return self._previous, (w.x, w.y)
 
-    def _advance(self, x: float, y: float) -> tuple[int, ...]:
-        """Move the target past every waypoint reached or passed; returns their indices."""
+    def _advance(self, x: float, y: float, yaw: float) -> tuple[int, ...]:
+        """Move the target past every waypoint the rear axle at (x, y) or the front point
+        reached; returns their indices."""
         advanced: list[int] = []
         n = len(self._waypoints)
+        ahead, left = self._front
+        c, s = math.cos(yaw), math.sin(yaw)
+        fx, fy = x + ahead * c - left * s, y + ahead * s + left * c
         for _ in range(n):
             _, b = self._segment(self._target)
             w = self._waypoints[self._target]
-            if math.hypot(x - b[0], y - b[1]) > w.tolerance:
+            if min(math.hypot(x - b[0], y - b[1]),
+                   math.hypot(fx - b[0], fy - b[1])) > w.tolerance:
                 break
             advanced.append(self._target)
             self._previous = b

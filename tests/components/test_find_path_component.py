@@ -45,12 +45,15 @@ HALF_WIDTH = 0.7
 #: The traversability maps: 40 m × 40 m around the start, 0.5 m cells (World frame).
 TRAV_CELLS = 80
 TRAV_ORIGIN = -20.0
+#: The ground under the front bumper, ahead of the rear axle (m).
+BUMPER = 2.45
 PER_CELL_METHODS = ("valid", "getPlanningMap", "getSensingMap", "getMap", "setMap")
 
 
 class ReplayedPose(SubscribePublishServer):
     """A pose source standing in for ModelServer: ``getPose`` answers the pose the test
-    set (its last ``place``), as a replayed log's servant would."""
+    set (its last ``place``), as a replayed log's servant would, and
+    ``getTransformation`` the bumper's ground frame."""
 
     def __init__(self, name: str = "modelServer", service: str = "ModelService") -> None:
         super().__init__(name)
@@ -71,7 +74,14 @@ class ReplayedPose(SubscribePublishServer):
         return await self.getPose()
 
     async def getTransformation(self, A: str, B: str) -> PoseTransformIDL:
-        raise EOutOfBounds("a replayed pose has no geometry")
+        # the one place of ModelServer's geometry FindPath asks: the ground under the
+        # front bumper (the Raptor's: 2.45 m ahead of the rear axle)
+        if (A, B) != ("Raptor:RearAxleCenter", "Raptor: Front-BumperCenter"):
+            raise EOutOfBounds(f"no frame {B!r} in this replayed geometry")
+        h = np.eye(4)
+        h[0, 3] = BUMPER
+        return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()), HTransform=h,
+                                initialUTM=np.zeros(3))
 
     async def getBodyList(self) -> StringSequenceIDL:
         return StringSequenceIDL(values=())
@@ -227,9 +237,23 @@ async def test_health_says_planning_and_turns_unhealthy_when_no_path_persists():
         await r.until(NO_PATH_UNHEALTHY + 0.5)
         health = r.planner.health()
         assert not health.healthy
-        assert "no path to the waypoint since 00:00:01 UTC" in health.detail
+        assert "no path to the waypoint since 00:00:01 UTC, no route reaches it" in \
+            health.detail
         await r.until(NO_PATH_UNHEALTHY + 3.5)  # the same streak: the same detail, logged once
         assert r.planner.health().detail == health.detail
+
+
+async def test_a_waypoint_inside_an_obstacle_is_reported_as_such():
+    """The operator put the waypoint in a building: no cell within its tolerance is
+    passable. FindPath vetoes (the seed's no-plan vote) and its health says why."""
+    from components.find_path.component import NO_PATH_UNHEALTHY
+    building: Box = (13.0, 19.0, -3.0, 3.0)
+    async with rig(waypoint(16.0, 0.0, tolerance=1.0), [building]) as r:
+        await r.until(NO_PATH_UNHEALTHY + 0.5)
+        votes = r.drain(r.votes)
+        health = r.planner.health()
+    assert votes and all(e.body.veto.all() for e in votes)
+    assert not health.healthy and "it lies in an obstacle" in health.detail
 
 
 async def test_before_the_first_map_it_vetoes_rather_than_plan_in_no_frame():
@@ -264,6 +288,54 @@ async def test_a_waypoint_beyond_the_map_is_planned_to_its_edge_then_on_as_the_m
     assert math.dist(after[0], (12.0, 0.0)) <= CELL
     assert after[-1][0] > 45.0 and abs(after[-1][1]) <= CELL
     assert np.all(np.diff(after[:, 0]) > 0)  # straight on east
+
+
+async def test_a_waypoint_short_of_a_wall_is_driven_to_bumper_first():
+    """The waypoint 1.2 m short of a wall ahead, 5.5 m off: the rear axle cannot come to
+    it facing the wall, nor swing round to come in side-on in the room left, so the
+    drivable path ends where the ground under the bumper (ModelServer's GroundFrame) is
+    within the waypoint's tolerance, as the Global Map judges arrival: straight on."""
+    wall: Box = (9.7, 10.3, -6.0, 6.0)
+    goal = waypoint(8.5, 0.0, tolerance=2.0)
+    async with rig(goal, [wall]) as r:
+        r.pose.place(3.0, 0.0)
+        await r.until(1.5)
+        refined = r.planner.refined
+        vote = r.drain(r.votes)[-1].body
+        stats = r.planner.statistics()
+    assert refined is not None and not vote.veto.any()
+    assert stats["bumper_arrivals"] == 1
+    x, y, h = refined.poses[-1]
+    bumper = (x + BUMPER * math.cos(h), y + BUMPER * math.sin(h))
+    assert math.dist(bumper, (8.5, 0.0)) <= goal.tolerance
+    assert max(abs(p[1]) for p in refined.poses) <= 0.5  # straight at it
+    assert x + BUMPER + 0.4 < wall[0]  # and the body short of the wall
+
+
+async def test_a_waypoint_in_the_open_is_driven_to_rear_axle_first():
+    """Where the rear axle can come to the waypoint, the path brings it there (the point
+    the arcs turn about): the vehicle passes the waypoint rather than pointing its bumper
+    at it and turning late for the next leg."""
+    goal = waypoint(8.5, 0.0, tolerance=2.0)
+    async with rig(goal, []) as r:
+        r.pose.place(3.0, 0.0)
+        await r.until(1.5)
+        refined = r.planner.refined
+        stats = r.planner.statistics()
+    assert refined is not None and stats["bumper_arrivals"] == 0
+    x, y, _ = refined.poses[-1]
+    assert math.dist((x, y), (8.5, 0.0)) <= 0.75 * goal.tolerance
+
+
+async def test_a_ground_frame_modelserver_does_not_know_is_reported_not_fatal():
+    async with rig(waypoint(16.0, 0.0), [], GroundFrame="Raptor: NoSuchFrame") as r:
+        await r.until(2.5)
+        votes = r.drain(r.votes)
+        health = r.planner.health()
+        stats = r.planner.statistics()
+    assert votes and not votes[-1].body.veto.any()  # it plans and votes on
+    assert stats["unknown_frames"] == 1  # asked once
+    assert not health.healthy and "Raptor: NoSuchFrame" in health.detail
 
 
 # --------------------------------------------------------------------------- replanning

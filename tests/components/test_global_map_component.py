@@ -228,6 +228,21 @@ async def test_waypoints_advance_as_the_vehicle_reaches_them(patrol):
     assert stats["waypoints_reached"] == (4 if patrol else 3)
 
 
+async def test_a_patrol_of_one_waypoint_finishes_there():
+    """A patrol needs two waypoints; with one it is reached once and the mission is
+    over (as Pure Pursuit takes it), not reached again on every map while the vehicle
+    stands on it."""
+    only = waypoint(10.0, 0.0)
+    async with rig() as r:
+        g = r.proxy
+        await g.setWaypointList(WaypointGroupIDL(waypoints=(only,), patrolMode=True))
+        assert await g.getNextWaypoint(only) is None
+        for _ in range(5):
+            await r.publish(trav_map(r.clock.now(), scene(), vehicle=(9.5, 0.0)))
+        assert await g.getCurrentWaypoint() is None
+        assert r.stats()["waypoints_reached"] == 1
+
+
 def pose_at(x: float, y: float, utm: np.ndarray = UTM) -> PoseTransformIDL:
     transform = np.eye(4)
     transform[:2, 3] = (x, y)

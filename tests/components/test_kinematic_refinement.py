@@ -139,12 +139,49 @@ def test_a_target_behind_a_closed_wall_is_not_reached():
     assert refiner.plan(blocked, cost, ORIGIN, CELL, (-6.0, 0.0, 0.0), (4.0, 0.0, 0.0)) is None
 
 
+def test_a_waypoint_short_of_a_wall_is_reached_by_the_bumper():
+    # The waypoint 1.2 m short of a wall, the vehicle 12 m off facing it: the rear
+    # axle can reach the waypoint's cell only side-on to the wall, by a swing; the
+    # bumper comes to the waypoint straight.
+    walls = [(-0.3, 0.3, -20.0, 20.0)]
+    blocked, cost = grids(walls)
+    waypoint, radius = (-1.5, 0.0), 1.5
+    start = (-12.0, 0.2, 0.0)
+    target = (-1.75, 0.25, None)  # the passable cell nearest it, as FindPath's goal
+    refiner = Refiner(0.9 * K_MAX, OFFSETS, RADIUS, hazard_margin=0.5 * CELL)
+    swing = refiner.plan(blocked, cost, ORIGIN, CELL, start, target, open_cost=6.0)
+    assert swing is not None and abs(swing.poses[-1][2]) > 1.0
+    refined = refiner.plan(blocked, cost, ORIGIN, CELL, start, target, open_cost=6.0,
+                           arrival=(*waypoint, radius, BODY[1], 0.0))
+    assert refined is not None
+    x, y, h = refined.poses[-1]
+    bumper = (x + BODY[1] * math.cos(h), y + BODY[1] * math.sin(h))
+    assert math.dist(bumper, waypoint) <= radius
+    assert math.dist((x, y), waypoint) > radius  # the bumper's test, not the axle's
+    assert refiner.step * (len(refined.poses) - 1) <= 1.1 * math.dist(start[:2], bumper)
+    for px, py, ph in drive(refined.poses, refined.curvatures, refiner.step):
+        assert not overlaps(body_points(px, py, ph), walls)
+
+
+def test_the_arrival_test_starts_after_the_first_motion():
+    # a vehicle already within the region gets a path that moves it (the Global Map,
+    # with the whole tolerance, will have counted the waypoint before FindPath asks)
+    blocked = np.zeros((CELLS, CELLS), dtype=bool)
+    cost = np.ones((CELLS, CELLS))
+    refiner = Refiner(0.9 * K_MAX, OFFSETS, RADIUS, hazard_margin=0.5 * CELL)
+    refined = refiner.plan(blocked, cost, ORIGIN, CELL, (0.0, 0.0, 0.0), (5.25, 0.25, None),
+                           arrival=(0.0, 0.0, 1.0, BODY[1], 0.0))
+    assert refined is not None and len(refined.poses) == 2
+
+
 def random_scene(rng: np.random.Generator) -> tuple[list[tuple[float, float, float, float]],
                                                     tuple[float, float, float],
                                                     tuple[float, float, float | None],
-                                                    float | None]:
+                                                    float | None,
+                                                    tuple[float, float, float, float, float]
+                                                    | None]:
     """Random boxes (and sometimes a wall with a gate), a start clear of them, a target
-    ahead, with or without a heading and a current curvature."""
+    ahead, with or without a heading, a current curvature and an arrival region."""
     walls: list[tuple[float, float, float, float]] = []
     if rng.random() < 0.5:
         low = float(rng.uniform(-8.0, 6.0))
@@ -161,7 +198,10 @@ def random_scene(rng: np.random.Generator) -> tuple[list[tuple[float, float, flo
     heading = float(rng.uniform(-math.pi, math.pi)) if rng.random() < 0.5 else None
     target = (float(rng.uniform(2.0, 10.0)), float(rng.uniform(-10.0, 10.0)), heading)
     curvature = float(rng.uniform(-K_MAX, K_MAX)) if rng.random() < 0.7 else None
-    return walls, start, target, curvature
+    arrival = ((target[0] + float(rng.uniform(-1.0, 1.0)),
+                target[1] + float(rng.uniform(-1.0, 1.0)), float(rng.uniform(0.5, 2.0)),
+                BODY[1], float(rng.uniform(-0.3, 0.3))) if rng.random() < 0.4 else None)
+    return walls, start, target, curvature, arrival
 
 
 @pytest.mark.skipif(Refiner(K_MAX, OFFSETS, RADIUS).kernel is None,
@@ -170,7 +210,7 @@ def test_the_compiled_search_returns_the_python_loops_path_bit_for_bit():
     rng = np.random.default_rng(2026)
     found = missing = 0
     for _ in range(60):
-        walls, start, target, curvature = random_scene(rng)
+        walls, start, target, curvature, arrival = random_scene(rng)
         blocked, cost = grids(walls)
         results = []
         for compiled in (True, False):
@@ -180,7 +220,7 @@ def test_the_compiled_search_returns_the_python_loops_path_bit_for_bit():
             if not compiled:
                 refiner.kernel = None
             refined = refiner.plan(blocked, cost, ORIGIN, CELL, start, target,
-                                   curvature=curvature, open_cost=6.0)
+                                   curvature=curvature, open_cost=6.0, arrival=arrival)
             results.append((refined, refiner.max_expansions))
         fast, slow = results[0][0], results[1][0]
         if slow is None:

@@ -123,6 +123,24 @@ def test_a_waypoint_within_its_tolerance_is_passed(arcs):
     assert out.lookahead_point == pytest.approx((10.0, 0.3 + 5.0))
 
 
+def test_the_front_point_reaches_a_waypoint_too(arcs):
+    # a waypoint 1.2 m short of a wall at x = 11.2: facing it, the rear axle stays 2.45 m
+    # behind the bumper and never comes within 1 m; the bumper's ground point does
+    pp = started(arcs, [Waypoint(10.0, 0.0, 1.0), Waypoint(10.0, 10.0, 1.0)])
+    pp.set_front(2.45)
+    assert pp.update(6.5, 0.0, 0.0).advanced == ()  # bumper at x = 8.95: 1.05 m off
+    out = pp.update(6.6, 0.0, 0.0)  # bumper at x = 9.05: 0.95 m
+    assert out.advanced == (0,) and out.target == 1
+    # the point turns with the vehicle, and may sit to one side: 2 m ahead, 0.5 m left
+    pp = started(arcs, [Waypoint(0.0, 3.0, 0.5)], at=(0.5, 0.0, 0.0))
+    pp.set_front(2.0, 0.5)
+    assert pp.front == (2.0, 0.5)
+    assert pp.update(0.5, 0.6, 0.0).advanced == ()  # facing east: the point at (2.5, 1.1)
+    assert pp.update(0.5, 0.6, math.pi / 2).state == "finished"  # facing north: (0, 2.6)
+    with pytest.raises(ValueError):
+        pp.set_front(math.nan)
+
+
 def test_passing_beside_a_via_point_outside_its_tolerance_is_not_reaching_it(arcs):
     pp = started(arcs, [Waypoint(10.0, 0.0, 1.0), Waypoint(10.0, 10.0, 1.0)])
     out = pp.update(10.5, 3.0, math.pi / 2)  # cut the corner: 3.04 m from it, past it

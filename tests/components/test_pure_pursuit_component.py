@@ -21,12 +21,20 @@ import numpy as np
 import pyproj
 import pytest
 
-from afa import System, VirtualClock
+from afa import EOutOfBounds, SubscribePublishServer, System, VirtualClock
 from afa.events import Subscription
 from components.pure_pursuit import PurePursuit
 from components.pure_pursuit.component import VOTE_PERIOD
 from components.pure_pursuit.parameters import PurePursuitParameters
-from idl import PoseTransformIDL, TimeIDL, VehiclePlan, WaypointGroupIDL, WaypointIDL
+from idl import (
+    Platform,
+    PoseTransformIDL,
+    StringSequenceIDL,
+    TimeIDL,
+    VehiclePlan,
+    WaypointGroupIDL,
+    WaypointIDL,
+)
 
 #: Suffield, Alberta (UTM zone 12 N), where the Raptor drove.
 START = (50.2712, -111.1834)
@@ -35,6 +43,8 @@ TO_UTM = pyproj.Transformer.from_crs("EPSG:4326", "EPSG:32612", always_xy=True)
 TO_LATLON = pyproj.Transformer.from_crs("EPSG:32612", "EPSG:4326", always_xy=True)
 #: Where the vehicle is probed, inside and outside a waypoint's tolerance (m).
 PROBE = 0.01
+#: The ground under the front bumper, ahead of the rear axle (m).
+BUMPER = 2.45
 
 
 def utm(lat: float, lon: float) -> tuple[float, float]:
@@ -87,11 +97,40 @@ class Rig:
         return self.drain()[-1].body
 
 
+class Geometry(SubscribePublishServer):
+    """ModelServer's geometry as far as Pure Pursuit asks it: where the ground under the
+    front bumper lies (the Raptor's: 2.45 m ahead of the rear axle)."""
+
+    def __init__(self) -> None:
+        super().__init__("modelServer")
+        self.serves(Platform, "ModelService")
+
+    async def getTransformation(self, A: str, B: str) -> PoseTransformIDL:
+        if (A, B) != ("Raptor:RearAxleCenter", "Raptor: Front-BumperCenter"):
+            raise EOutOfBounds(f"no frame {B!r} here")
+        h = np.eye(4)
+        h[0, 3] = BUMPER
+        return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()), HTransform=h,
+                                initialUTM=np.zeros(3))
+
+    async def getPose(self) -> PoseTransformIDL:
+        raise EOutOfBounds("no pose here")
+
+    async def getWaitPose(self) -> PoseTransformIDL:
+        raise EOutOfBounds("no pose here")
+
+    async def getBodyList(self) -> StringSequenceIDL:
+        return StringSequenceIDL(values=())
+
+    async def getBodyFrameList(self, body: str) -> StringSequenceIDL:
+        raise EOutOfBounds("no bodies here")
+
+
 @asynccontextmanager
-async def rig() -> AsyncIterator[Rig]:
+async def rig(geometry: bool = False, **parameters: Any) -> AsyncIterator[Rig]:
     clock = VirtualClock(start=1_000.0)
-    component = PurePursuit("purePursuit", PurePursuitParameters())
-    system = System([component], clock=clock)
+    component = PurePursuit("purePursuit", PurePursuitParameters(**parameters))
+    system = System([component, *([Geometry()] if geometry else [])], clock=clock)
     async with system:
         votes = system.channel.subscribe("Raptor", "ArcVote", maxsize=1 << 12)
         plan = await system.resolve(VehiclePlan, "PurePursuit")
@@ -143,6 +182,40 @@ async def test_lat_lon_waypoints_are_placed_through_the_poses_initial_utm():
         assert await r.plan.getCurrentWaypoint() is None
         assert is_stop(r.last_vote())
         assert r.component.statistics()["waypoints_reached"] == 2
+
+
+async def test_the_bumper_reaches_a_waypoint_where_modelserver_puts_it():
+    """A waypoint the rear axle cannot come to (short of a wall, say) is reached when the
+    ground under the front bumper, where ModelServer's geometry puts GroundFrame, comes
+    within its tolerance: as the Global Map judges."""
+    tolerance = 0.5
+    w0, p0 = waypoint_at(20.0, 0.0, tolerance)
+    w1, _ = waypoint_at(20.0, 20.0, tolerance)
+    async with rig(geometry=True) as r:
+        await r.plan.setWaypointList(WaypointGroupIDL(waypoints=(w0, w1)))
+        r.drive_to(0.0, 0.0, 0.0)
+        await r.tick()
+        r.drive_to(*approach(p0, (0.0, 0.0), BUMPER + tolerance + PROBE))
+        await r.tick()
+        assert await r.plan.getCurrentWaypoint() == w0
+        r.drive_to(*approach(p0, (0.0, 0.0), BUMPER + tolerance - PROBE))
+        await r.tick()
+        assert await r.plan.getCurrentWaypoint() == w1
+        assert r.component.health().healthy
+
+
+async def test_a_ground_frame_modelserver_does_not_know_leaves_the_rear_axle():
+    tolerance = 0.5
+    w0, p0 = waypoint_at(20.0, 0.0, tolerance)
+    async with rig(geometry=True, GroundFrame="Raptor: NoSuchFrame") as r:
+        await r.plan.setWaypointList(WaypointGroupIDL(waypoints=(w0,)))
+        r.drive_to(*approach(p0, (0.0, 0.0), BUMPER))
+        await r.tick(3)
+        assert await r.plan.getCurrentWaypoint() == w0  # the bumper would be on it
+        assert not is_stop(r.last_vote())
+        health = r.component.health()
+        assert not health.healthy and "Raptor: NoSuchFrame" in health.detail
+        assert r.component.statistics()["unknown_frames"] == 1  # asked once
 
 
 async def test_the_current_waypoint_is_the_first_before_any_pose_arrives():

@@ -195,3 +195,46 @@ def test_the_hazard_field_is_built_before_the_system_starts(monkeypatch):
     assert main(["run", str(config), "--sim", "--fast", "--world", "short-hop",
                  "--duration", "0.5"]) == 0
     assert order[:2] == ["hazards", "system"], order
+
+
+def test_the_judge_counts_a_waypoint_reached_by_the_rear_axle_or_the_front_bumper():
+    """The mission's judge takes the points the vehicle itself judges by (the Global Map,
+    FindPath and Pure Pursuit: rear axle or front bumper), on the true pose: a waypoint
+    short of a wall is reached bumper first."""
+    from components.simulation import WAYPOINT_TOLERANCE
+    simulation = RaptorSimulation(WORLDS / "short-hop.xml", VirtualClock())
+    first, second = simulation.world.mission.waypoints[:2]
+    bumper = 2.45  # the simulated Raptor's front bumper, ahead of the rear axle (m)
+    vehicle = simulation.vehicle
+    # facing east towards the first: the bumper just outside the tolerance, then inside
+    vehicle.reset(first.east - bumper - WAYPOINT_TOLERANCE - 0.05, first.north, 90.0)
+    simulation._track_waypoints()  # noqa: SLF001 - the judge under test
+    assert simulation.waypoints_reached == 0
+    vehicle.reset(first.east - bumper - WAYPOINT_TOLERANCE + 0.05, first.north, 90.0)
+    simulation._track_waypoints()  # noqa: SLF001
+    assert simulation.waypoints_reached == 1
+    # beyond the second, facing away from it (east): the rear axle reaches it
+    vehicle.reset(second.east + WAYPOINT_TOLERANCE + 0.05, second.north, 90.0)
+    simulation._track_waypoints()  # noqa: SLF001
+    assert simulation.waypoints_reached == 1
+    vehicle.reset(second.east + WAYPOINT_TOLERANCE - 0.05, second.north, 90.0)
+    simulation._track_waypoints()  # noqa: SLF001
+    assert simulation.waypoints_reached == 2
+
+
+def test_a_patrol_of_one_waypoint_is_reached_once(tmp_path):
+    """A patrol needs two waypoints (Pure Pursuit and the Global Map finish one of one
+    waypoint there): the judge counts the arrival once, not on every step the vehicle
+    stands on it."""
+    world = tmp_path / "one.xml"
+    world.write_text(
+        '<world name="one"><origin latitude="50.27" longitude="-111.18" elevation="750"/>'
+        '<terrain width="40" depth="40" resolution="0.5"/>'
+        '<vehicle east="0" north="0" heading="90"/>'
+        '<mission patrol="true"><waypoint east="10" north="0"/></mission></world>')
+    simulation = RaptorSimulation(world, VirtualClock())
+    simulation.vehicle.reset(9.0, 0.0, 90.0)
+    for _ in range(5):
+        simulation._track_waypoints()  # noqa: SLF001 - the judge under test
+    assert simulation.waypoints_reached == 1
+    assert simulation.finished.is_set()
