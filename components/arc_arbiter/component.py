@@ -20,7 +20,11 @@ vetoed for ``RecoverAfter`` seconds (and only then: a stale or missing vote stil
 stop), the arbiter reverses ``RecoverDistance`` at ``RecoverSpeed`` on the steering that
 turns the vehicle towards the behaviours' preferred arc, checked clear on the latest
 global Traversability map, then hands back to the votes. Any other fail-safe during a
-back-out stops it at once; a new map that blocks the rest of it stops it too.
+back-out stops it at once; a new map that blocks the rest of it stops it too. After
+``RecoverLimit`` back-outs in a row (no decision between them let the vehicle drive:
+the votes stay vetoed, FindPath has no path at all) it stands, unhealthy, until a
+decision lets the vehicle drive again: nothing looks behind the vehicle, and a dead end
+that backing out has not opened is not opened by more of it.
 
 Commands go out when the decision changes and at least every ``COMMAND_REFRESH`` seconds
 (feeding Vehicle Control's watchdog). Deciding never waits for Vehicle Control: a sender
@@ -73,6 +77,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._apron: tuple[float, float, float, float, float, float] | None = None
         self._vetoed_since: float | None = None  # every arc vetoed since then
         self._backing: tuple[int, float] | None = None  # arc index, reverse until
+        self._backouts_in_row = 0  # since the last decision that let the vehicle drive
         self.control = self.uses(VehicleControl, p.VehicleControlName)
         self.arcs = ArcSet.from_parameters()
         self.book = VoteArbiter(p, self.arcs, required=p.RequiredBehaviours)
@@ -86,7 +91,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._busy = False  # the sender's call is waiting for Vehicle Control
         self.counters = {"votes": 0, "decisions": 0, "commands": 0, "command_errors": 0,
                          "failsafe_stops": 0, "rejected_votes": 0, "backouts": 0,
-                         "backouts_blocked": 0}
+                         "backouts_blocked": 0, "backouts_refused": 0}
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
@@ -98,6 +103,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._map = None
         self._apron = None
         self._vetoed_since = self._backing = None
+        self._backouts_in_row = 0
 
     async def run(self) -> None:
         self.spawn(self._sender(), f"{self.name}:sender")
@@ -159,6 +165,10 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         p = self.parameters
         if p.RecoverAfter <= 0:
             return decision
+        if decision.failsafe is None and self._backouts_in_row:
+            self._backouts_in_row = 0  # the votes let the vehicle drive again
+            if self._health_detail.startswith("standing:"):
+                self.set_health(True, "commanding")
         if decision.failsafe != "all-vetoed":
             if decision.failsafe is not None:
                 self._backing = None  # stale or missing votes: stop, whatever else
@@ -174,16 +184,25 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
                 and now - self._vetoed_since >= p.RecoverAfter - TIME_TOLERANCE:
             self._vetoed_since = now  # the next try, if this one finds no way
             preferred = float(self.arcs.curvatures[int(np.argmax(decision.scores))])
-            for index in reverse_candidates(self.arcs.curvatures, preferred):
+            candidates = reverse_candidates(self.arcs.curvatures, preferred)
+            if p.RecoverLimit and self._backouts_in_row >= p.RecoverLimit:
+                candidates = []
+                self.counters["backouts_refused"] += 1
+                self.set_health(False, f"standing: every arc still vetoed after "
+                                       f"{self._backouts_in_row} back-outs in a row "
+                                       "(RecoverLimit)")
+            for index in candidates:
                 if self._reverse_clear(index, p.RecoverDistance):
                     self._backing = (index, now + p.RecoverDistance / p.RecoverSpeed)
+                    self._backouts_in_row += 1
                     self.counters["backouts"] += 1
                     self.log.info("every arc vetoed for %.1f s: backing out %.1f m on "
                                   "curvature %.3f", p.RecoverAfter, p.RecoverDistance,
                                   float(self.arcs.curvatures[index]))
                     break
             else:
-                self.counters["backouts_blocked"] += 1
+                if candidates:
+                    self.counters["backouts_blocked"] += 1
         if self._backing is None:
             return decision
         index = self._backing[0]

@@ -66,6 +66,12 @@ class ArcArbiterParameters(Parameters):
         2.5, unit="m", description="afa addition: how far one back-out reverses")
     RecoverSpeed: Annotated[float, Field(gt=0, le=1)] = param(
         0.3, unit="m/s", description="afa addition: the reversing speed of a back-out")
+    RecoverLimit: Annotated[int, Field(ge=0)] = param(
+        3, unit="1",
+        description="afa addition: back-outs in a row (no decision between them lets the "
+                    "vehicle drive) after which the arbiter stands and reports itself "
+                    "unhealthy: votes that stay vetoed (no path to the waypoint at all) "
+                    "must not reverse the vehicle blind for ever; 0: no limit")
     TraverseEventName: str = param(
         "Traverse", unit="-",
         description="afa addition: the global Traversability map (TravMapArrayEventIDL) "

@@ -226,3 +226,36 @@ async def test_recover_after_zero_stands_still_as_the_seed_does(recover_after):
         veto_all_until(r, 2.0, 10.0)
         await r.until(10.0)
         assert reverses(r) == []
+
+
+def drive_until(r, start: float, end: float) -> None:
+    """Votes that let the vehicle drive (no veto), at 10 Hz from ``start`` to ``end``."""
+    votes = np.zeros(N, dtype=np.float32)
+    votes[ARCS.straight_index] = 1.0
+    t = start
+    while t < end:
+        r.publish_at(t, vote("ObstacleAvoidance", votes=votes))
+        r.publish_at(t, vote("PurePursuit", votes=votes))
+        t = round(t + 0.1, 6)
+
+
+async def test_after_recover_limit_back_outs_in_a_row_it_stands_until_the_votes_clear():
+    """Votes that stay vetoed (FindPath with no path at all: the waypoint inside a
+    building) back the vehicle out RecoverLimit times, then it stands and says why,
+    rather than reverse blind for ever; a decision that lets it drive starts a new row."""
+    async with rig(cruise=False, parameters=BACKOUT.model_copy(
+            update={"RecoverLimit": 2})) as r:
+        r.system.channel.publish("Raptor", "Traverse", trav([]), origin="test")
+        veto_all_until(r, 2.0, 40.0)
+        await r.until(40.0)
+        stats = r.arbiter.statistics()
+        health = r.arbiter.health()
+        assert stats["backouts"] == 2 and stats["backouts_refused"] >= 1
+        assert not health.healthy and "2 back-outs in a row" in health.detail
+        assert reverses(r, 13.0) and reverses(r, 19.0) == []  # the second ended at 18 s
+        drive_until(r, 40.0, 42.0)
+        veto_all_until(r, 42.0, 50.0)
+        await r.until(50.0)
+        assert r.arbiter.health().healthy
+        assert r.arbiter.statistics()["backouts"] == 3  # a new row
+        assert reverses(r, 44.0)
