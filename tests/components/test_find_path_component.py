@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vehicle_rig import BUMPER, bumper_transformation
 
 from afa import EOutOfBounds, SubscribePublishServer, System, VirtualClock
 from afa.events import Subscription
@@ -45,8 +46,6 @@ HALF_WIDTH = 0.7
 #: The traversability maps: 40 m × 40 m around the start, 0.5 m cells (World frame).
 TRAV_CELLS = 80
 TRAV_ORIGIN = -20.0
-#: The ground under the front bumper, ahead of the rear axle (m).
-BUMPER = 2.45
 PER_CELL_METHODS = ("valid", "getPlanningMap", "getSensingMap", "getMap", "setMap")
 
 
@@ -74,14 +73,7 @@ class ReplayedPose(SubscribePublishServer):
         return await self.getPose()
 
     async def getTransformation(self, A: str, B: str) -> PoseTransformIDL:
-        # the one place of ModelServer's geometry FindPath asks: the ground under the
-        # front bumper (the Raptor's: 2.45 m ahead of the rear axle)
-        if (A, B) != ("Raptor:RearAxleCenter", "Raptor: Front-BumperCenter"):
-            raise EOutOfBounds(f"no frame {B!r} in this replayed geometry")
-        h = np.eye(4)
-        h[0, 3] = BUMPER
-        return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()), HTransform=h,
-                                initialUTM=np.zeros(3))
+        return bumper_transformation(A, B, self.clock.now())
 
     async def getBodyList(self) -> StringSequenceIDL:
         return StringSequenceIDL(values=())

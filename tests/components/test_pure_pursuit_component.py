@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pyproj
 import pytest
+from vehicle_rig import BUMPER, bumper_transformation
 
 from afa import EOutOfBounds, SubscribePublishServer, System, VirtualClock
 from afa.events import Subscription
@@ -43,8 +44,6 @@ TO_UTM = pyproj.Transformer.from_crs("EPSG:4326", "EPSG:32612", always_xy=True)
 TO_LATLON = pyproj.Transformer.from_crs("EPSG:32612", "EPSG:4326", always_xy=True)
 #: Where the vehicle is probed, inside and outside a waypoint's tolerance (m).
 PROBE = 0.01
-#: The ground under the front bumper, ahead of the rear axle (m).
-BUMPER = 2.45
 
 
 def utm(lat: float, lon: float) -> tuple[float, float]:
@@ -106,12 +105,7 @@ class Geometry(SubscribePublishServer):
         self.serves(Platform, "ModelService")
 
     async def getTransformation(self, A: str, B: str) -> PoseTransformIDL:
-        if (A, B) != ("Raptor:RearAxleCenter", "Raptor: Front-BumperCenter"):
-            raise EOutOfBounds(f"no frame {B!r} here")
-        h = np.eye(4)
-        h[0, 3] = BUMPER
-        return PoseTransformIDL(time=TimeIDL.from_seconds(self.clock.now()), HTransform=h,
-                                initialUTM=np.zeros(3))
+        return bumper_transformation(A, B, self.clock.now())
 
     async def getPose(self) -> PoseTransformIDL:
         raise EOutOfBounds("no pose here")

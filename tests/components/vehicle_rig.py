@@ -9,6 +9,8 @@
 - :func:`decode_host_bytes`: the controller's received bytes decoded again, from the
   start, with the MPC555 codec's device-side decoder.
 - :func:`wire_commands`: the fake controller's decoded commands of one type after a time.
+- :func:`bumper_transformation`: ModelServer's ``getTransformation`` as far as the
+  planners ask it (where the ground under the front bumper lies), for stand-ins.
 """
 
 from __future__ import annotations
@@ -19,20 +21,34 @@ from typing import Any
 
 import numpy as np
 
-from afa import SubscribePublishServer
+from afa import EOutOfBounds, SubscribePublishServer
 from afa.clock import Clock
 from afa.errors import TransportClosed
 from afa.transport import ByteStream, DeviceSpec
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
 from components.mpc555.codec import Command, Mpc555DeviceDecoder, SetVelocity
 from components.mpc555.fake import FakeMpc555, ReceivedCommand
-from idl import ArcVoteIDL, TimeIDL
+from idl import ArcVoteIDL, PoseTransformIDL, TimeIDL
 
 __all__ = ["SerialLine", "Cruise", "decode_host_bytes", "wire_commands", "stops_after",
-           "MPC555_BAUD"]
+           "bumper_transformation", "MPC555_BAUD", "BUMPER"]
 
 #: The MPC555 link's rate (Table A.13 ``Baudrate``).
 MPC555_BAUD = 115200
+#: The ground under the Raptor's front bumper, ahead of the rear axle (m).
+BUMPER = 2.45
+
+
+def bumper_transformation(a: str, b: str, now: float) -> PoseTransformIDL:
+    """^A T_B for A the rear axle and B the ground under the front bumper (the one place
+    of ModelServer's geometry FindPath and Pure Pursuit ask); EOutOfBounds for any other
+    pair, as ModelServer answers for a frame it does not know."""
+    if (a, b) != ("Raptor:RearAxleCenter", "Raptor: Front-BumperCenter"):
+        raise EOutOfBounds(f"no frame {b!r} in this stand-in's geometry")
+    h = np.eye(4)
+    h[0, 3] = BUMPER
+    return PoseTransformIDL(time=TimeIDL.from_seconds(now), HTransform=h,
+                            initialUTM=np.zeros(3))
 
 Factory = Callable[[DeviceSpec], Awaitable[ByteStream]]
 
