@@ -58,7 +58,7 @@ from afa.transport import AsyncioByteStream, DeviceFactory, PtyDeviceStream, ope
 from components.gps_sokkia.codec import latlon_to_grid_near, latlon_to_utm
 from components.map_quality import map_summary
 from components.model_server.geometry import GeometryModel
-from components.waypoints import to_local
+from components.waypoints import reached, to_local
 from idl import (
     ArcVoteIDL,
     PlanningBoundaryIDL,
@@ -564,12 +564,9 @@ class RaptorSimulation:
         target = waypoints[self._next_waypoint]
         state = self.state
         p = self.vehicle.parameters
-        front = p.body_length - p.rear_overhang
-        bumper = (state.east + front * math.cos(state.yaw),
-                  state.north + front * math.sin(state.yaw))
-        distance = min(math.hypot(state.east - target.east, state.north - target.north),
-                       math.hypot(bumper[0] - target.east, bumper[1] - target.north))
-        if distance <= WAYPOINT_TOLERANCE:
+        if reached(state.east, state.north, math.cos(state.yaw), math.sin(state.yaw),
+                   (p.body_length - p.rear_overhang, 0.0), target.east, target.north,
+                   WAYPOINT_TOLERANCE):
             # a patrol needs two waypoints: with one it is a plain mission, as the
             # vehicle's Pure Pursuit and Global Map take it
             patrol = self.world.mission.patrol and len(waypoints) >= 2

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from datetime import UTC, datetime
 from typing import Any
 
@@ -55,10 +56,10 @@ from afa.diagnostics import Stopwatch
 from afa.errors import AfaError
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
 from components.find_path.dstar_lite import DStarLite, PlanStatus
-from components.find_path.kinematic import Refined, Refiner
+from components.find_path.kinematic import Arrival, Refined, Refiner
 from components.find_path.parameters import FindPathParameters
 from components.pure_pursuit.pursuit import gaussian_votes, pursuit_curvature, to_vehicle_frame
-from components.waypoints import to_local
+from components.waypoints import ground_point, to_local
 from idl import ArcVoteIDL, PlanMapEventIDL, PlannedPathIDL, Platform, TimeIDL, WaypointIDL
 from idl import GlobalMap as GlobalMapInterface
 
@@ -76,8 +77,6 @@ BEYOND_SEARCH = 10.0
 #: A drivable path to the waypoint ends with the rear axle or the bumper's ground point
 #: within this share of the waypoint's tolerance (the rest absorbs tracking error).
 ARRIVAL_SHARE = 0.75
-#: The frame of the pose ModelServer serves (GroundFrame's place is asked relative to it).
-VEHICLE_FRAME = "Raptor:RearAxleCenter"
 
 
 class CostGrid:
@@ -434,8 +433,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         # The body discs keep the refined path clear; the cells D* leaves out for the
         # rear axle (within InflationRadius) are open to it at twice the margin's cost,
         # so it may pass closer than D* would, where the body fits (a slalom's gap).
-        def search(arrival: tuple[float, float, float, float, float] | None
-                   ) -> Refined | None:
+        def search(arrival: Arrival | None) -> Refined | None:
             assert self._refiner is not None
             return self._refiner.plan(grid.blocked, grid.cost, grid.origin, grid.gridsize,
                                       pose, (*centres[k], None), curvature=self._steering,
@@ -448,8 +446,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.counters["refined" if refined is not None else "undrivable"] += 1
         return refined, refined is None
 
-    def _to_waypoint(self, search: Any, x: float, y: float, tolerance: float
-                     ) -> Refined | None:
+    def _to_waypoint(self, search: Callable[[Arrival | None], Refined | None], x: float,
+                     y: float, tolerance: float) -> Refined | None:
         """The drivable path to the waypoint (decision 0042): the rear axle within
         ``ARRIVAL_SHARE`` of its tolerance, the point the arcs turn about, so the vehicle
         passes a waypoint where the next leg turns away without first pointing at it;
@@ -473,7 +471,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         point, and the component unhealthy: its health names the frame)."""
         frame = self.parameters.GroundFrame
         try:
-            transform = await self.platform.getTransformation(VEHICLE_FRAME, frame)
+            self.front = await ground_point(self.platform, frame)
         except EOutOfBounds as exc:
             self.log.warning("%s: ModelServer does not know the frame %r (%s): arrival "
                              "is judged by the rear axle only", self.name, frame, exc)
@@ -482,8 +480,6 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             return
         except AfaError:
             return  # not reachable yet: the next cycle asks again
-        h = np.asarray(transform.HTransform, dtype=np.float64)
-        self.front = (float(h[0, 3]), float(h[1, 3]))
 
     def _lookahead(self, points: list[tuple[float, float]], vehicle: tuple[float, float],
                    gridsize: float) -> tuple[float, float]:

@@ -66,10 +66,13 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from afa.kernels import compiled
+from components.waypoints import reached
 
-__all__ = ["Refiner", "Refined", "Pose", "SEARCH_KERNEL"]
+__all__ = ["Refiner", "Refined", "Pose", "Arrival", "SEARCH_KERNEL"]
 
 Pose = tuple[float, float, float]  # x, y (m, map frame), heading (rad, from +x)
+#: An arrival region: waypoint x, y, radius (m), and the front point's ahead, left (m)
+Arrival = tuple[float, float, float, float, float]
 
 #: The compiled search in use (:mod:`components.find_path._search_jit`), None when the
 #: Python loop searches (``AFA_KERNELS=numpy``, or no numba).
@@ -149,8 +152,7 @@ class Refiner:
              origin: tuple[float, float], gridsize: float, start: Pose,
              target: tuple[float, float, float | None],
              curvature: float | None = None, open_cost: float | None = None,
-             arrival: tuple[float, float, float, float, float] | None = None
-             ) -> Refined | None:
+             arrival: Arrival | None = None) -> Refined | None:
         """A drivable path from ``start`` to ``target`` (x, y, heading or None), or None
         when the search finds none within its window and budget.
 
@@ -255,7 +257,8 @@ class Refiner:
             c, s = math.cos(h), math.sin(h)
             if (x - tx) ** 2 + (y - ty) ** 2 <= tol2 and (
                     th is None or abs(_wrap(h - th)) <= self.heading_tolerance) or (
-                    n > 0 and arrival is not None and _arrived(arrival, x, y, c, s)):
+                    n > 0 and arrival is not None and reached(
+                        x, y, c, s, arrival[3:], arrival[0], arrival[1], arrival[2])):
                 return self._path(poses, parents, kappas, n, expansions, self.step)
             required = min(need, escape_from - 0.05 + escape_rate * travel[n])
             for kappa, samples in self._motions:
@@ -299,8 +302,7 @@ class Refiner:
                          window_cost: NDArray[np.float64], togo: NDArray[np.float64],
                          corner: tuple[float, float], g: float, start: Pose,
                          target: tuple[float, float, float | None], curvature: float | None,
-                         escape_from: float,
-                         arrival: tuple[float, float, float, float, float] | None
+                         escape_from: float, arrival: Arrival | None
                          ) -> Refined | None:
         """:meth:`plan`'s search by the compiled kernel (``components/find_path/
         _search_jit.py``): the same states in the same order, the same path."""
@@ -320,7 +322,8 @@ class Refiner:
                       escape_from, self.escape_rate]),
             np.array([target[0], target[1], 0.0 if th is None else th,
                       0.0 if th is None else 1.0,
-                      *((arrival[0], arrival[1], arrival[2] ** 2, arrival[3], arrival[4])
+                      *((arrival[0], arrival[1], arrival[2] * arrival[2], arrival[3],
+                         arrival[4])
                         if arrival is not None else (0.0, 0.0, -1.0, 0.0, 0.0))]),
             self.curvatures[0], self.position_tolerance ** 2, self.heading_tolerance,
             self.curvature_change_cost, self.step, self.bins, self.max_expansions,
@@ -379,17 +382,6 @@ def _arc(kappa: float, s: float) -> tuple[float, float]:
     if abs(kappa) < 1e-12:
         return (s, 0.0)
     return (math.sin(kappa * s) / kappa, (1.0 - math.cos(kappa * s)) / kappa)
-
-
-def _arrived(arrival: tuple[float, float, float, float, float], x: float, y: float,
-             c: float, s: float) -> bool:
-    """Whether the rear axle at (x, y), heading (cos, sin) = (c, s), or the point
-    ``arrival[3:]`` ahead and left of it lies within ``arrival[2]`` of ``arrival[:2]``."""
-    ax, ay, radius, ahead, left = arrival
-    r2 = radius * radius
-    return ((x - ax) ** 2 + (y - ay) ** 2 <= r2
-            or (x + ahead * c - left * s - ax) ** 2 + (y + ahead * s + left * c - ay) ** 2
-            <= r2)
 
 
 def _wrap(angle: float) -> float:

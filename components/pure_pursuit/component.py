@@ -30,7 +30,7 @@ from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
 from components.pure_pursuit.parameters import PurePursuitParameters
 from components.pure_pursuit.pursuit import PurePursuit as PursuitCore
 from components.pure_pursuit.pursuit import PursuitOutput, PursuitSettings, Waypoint
-from components.waypoints import to_local
+from components.waypoints import ground_point, to_local
 from idl import (
     ArcVoteIDL,
     Platform,
@@ -46,8 +46,6 @@ __all__ = ["PurePursuit", "BEHAVIOUR", "VOTE_PERIOD"]
 BEHAVIOUR = "PurePursuit"
 #: Table 22: Pure Pursuit votes every 100 ms.
 VOTE_PERIOD = 0.1
-#: The frame of the pose ModelServer publishes (GroundFrame's place is asked relative to it).
-VEHICLE_FRAME = "Raptor:RearAxleCenter"
 
 
 class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
@@ -97,7 +95,7 @@ class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
         frame = self.parameters.GroundFrame
         while self.front_known is None:
             try:
-                transform = await self.platform.getTransformation(VEHICLE_FRAME, frame)
+                front = await ground_point(self.platform, frame)
             except EOutOfBounds as exc:
                 self.log.warning("%s: ModelServer does not know the frame %r (%s): "
                                  "waypoints are reached by the rear axle only", self.name,
@@ -110,8 +108,7 @@ class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
             except AfaError:
                 await self.clock.sleep(VOTE_PERIOD)  # not reachable yet: ask again
                 continue
-            h = transform.HTransform
-            self.core.set_front(float(h[0, 3]), float(h[1, 3]))
+            self.core.set_front(*front)
             self.front_known = True
 
     def _on_pose(self, event: Event) -> None:

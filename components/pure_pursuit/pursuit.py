@@ -93,6 +93,7 @@ from numpy.typing import NDArray
 
 from components.arcs import ArcSet, ArcVotes
 from components.pure_pursuit.parameters import PurePursuitParameters
+from components.waypoints import reached
 
 __all__ = [
     "PursuitSettings",
@@ -353,14 +354,11 @@ class PurePursuit:
         reached; returns their indices."""
         advanced: list[int] = []
         n = len(self._waypoints)
-        ahead, left = self._front
         c, s = math.cos(yaw), math.sin(yaw)
-        fx, fy = x + ahead * c - left * s, y + ahead * s + left * c
         for _ in range(n):
             _, b = self._segment(self._target)
             w = self._waypoints[self._target]
-            if min(math.hypot(x - b[0], y - b[1]),
-                   math.hypot(fx - b[0], fy - b[1])) > w.tolerance:
+            if not reached(x, y, c, s, self._front, b[0], b[1], w.tolerance):
                 break
             advanced.append(self._target)
             self._previous = b
