@@ -1456,10 +1456,15 @@ def latlon_to_grid_near(latitude_deg: float, longitude_deg: float, easting_m: fl
     or the equator from it. Zones side by side are 6° apart and the two conventions of
     northing 10,000 km, so for points within a few hundred kilometres of the origin the
     nearest candidate (the point's own zone or a neighbour, either convention) is the
-    origin's grid."""
+    origin's grid. Neighbours are taken around both the point's zone and its 6° band's
+    zone, because the Norway and Svalbard exceptions make zones 12° wide: at 78° N a
+    point just east of 9° E is in zone 33 while the ground just west of it is in 31."""
     own = latlon_to_utm(latitude_deg, longitude_deg)
+    band = min(int((float(longitude_deg) + 180.0) // 6.0) + 1, 60)
+    zones = {z % 60 + 1 for centre in (own.zone_number, band) for z in (centre - 2, centre - 1,
+                                                                        centre)}
     best, best_distance = own, math.inf
-    for zone in (own.zone_number, own.zone_number % 60 + 1, (own.zone_number - 2) % 60 + 1):
+    for zone in sorted(zones):
         for hemisphere in ("N", "S"):
             candidate = latlon_to_utm(latitude_deg, longitude_deg, zone=zone,
                                       hemisphere=hemisphere)

@@ -87,12 +87,16 @@ def test_grid_convergence_is_the_textbook_angle(latitude, longitude, zone):
     ((45.0, -71.9998), (45.0, -72.0002)),    # and back west
     ((0.0001, 10.0), (-0.0001, 10.0)),       # south across the equator
     ((-0.0001, -72.0001), (0.0002, -71.9997)),  # both at once
+    ((78.0, 8.9995), (78.0, 9.0005)),        # Svalbard: zone 31 to 33, two zones apart
+    ((78.0, 9.0005), (78.0, 8.9995)),        # and back west
+    ((60.5, 2.9995), (60.5, 3.0005)),        # south-western Norway: zone 31 to 32
+    ((-17.8, 179.9998), (-17.8, -179.9998)),  # east across the antimeridian
 ])
 def test_a_waypoint_across_a_boundary_is_placed_in_the_vehicles_grid(origin, point):
     start = latlon_to_utm(*origin)  # the first fix: the receiver's own grid
     x, y = to_local(WaypointIDL(latitude=point[0], longitude=point[1]),
                     np.array([start.easting_m, start.northing_m, 0.0]))
-    east = parallel_arc(origin[0], point[1] - origin[1])
+    east = parallel_arc(origin[0], (point[1] - origin[1] + 180.0) % 360.0 - 180.0)
     north = meridian_arc(origin[0], point[0] - origin[0])
     k = scale(origin[0], origin[1] - (start.zone_number * 6 - 183))
     gamma = convergence(origin[0], origin[1], start.zone_number)
