@@ -521,6 +521,7 @@ def _log_times(clock: Any) -> Iterator[None]:
 
 
 async def _run_on(args: argparse.Namespace, clock: Any) -> int:
+    from afa.bridge.runner import describe as describe_bridge
     from afa.bridge.runner import summary as bridge_summary
     from afa.bridge.runner import system_options
     from afa.errors import StartupError, TaskFailed
@@ -572,6 +573,9 @@ async def _run_on(args: argparse.Namespace, clock: Any) -> int:
             if not logging.getLogger("afa.system").isEnabledFor(logging.WARNING):
                 for note in system.notes:  # logged as warnings, unless those are hidden
                     print(f"afa: {note}", file=sys.stderr)
+            bridged = describe_bridge(system)
+            if bridged is not None:
+                print(f"afa: {bridged}", file=sys.stderr, flush=True)
             duration, finished = args.duration, None
             if simulation is not None and duration is None:
                 # a simulated run ends with its mission (or drive script), or at its limit
@@ -687,17 +691,21 @@ async def _until_stopped(system: Any, stop: asyncio.Event, duration: float | Non
                          progress: Any, finished: asyncio.Event | None = None) -> None:
     """Run the system until ``duration``, a signal, ``finished``, or a failure (raised);
     print progress meanwhile."""
-    from afa.tasks import Scope
+    from afa.tasks import Scope, first_error
 
-    async with Scope() as scope:
-        runner = scope.spawn(system.run(duration, until=finished), "afa-run")
-        signalled = scope.spawn(stop.wait(), "afa-signal")
-        reporter = scope.spawn(progress, "afa-progress")
-        done, _ = await asyncio.wait([runner, signalled], return_when=asyncio.FIRST_COMPLETED)
-        for task in (runner, signalled, reporter):
-            task.cancel()
-        for task in done:
-            task.result()
+    try:
+        async with Scope() as scope:
+            runner = scope.spawn(system.run(duration, until=finished), "afa-run")
+            signalled = scope.spawn(stop.wait(), "afa-signal")
+            reporter = scope.spawn(progress, "afa-progress")
+            done, _ = await asyncio.wait([runner, signalled],
+                                         return_when=asyncio.FIRST_COMPLETED)
+            for task in (runner, signalled, reporter):
+                task.cancel()
+            for task in done:
+                task.result()
+    except BaseExceptionGroup as group:  # the failure itself (TaskFailed: one line)
+        raise first_error(group) from None
 
 
 async def _progress(system: Any, simulation: Any, clock: Any, clock_start: float,

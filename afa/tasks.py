@@ -27,6 +27,8 @@ import logging
 from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from afa.errors import AfaError
+
 if TYPE_CHECKING:
     from afa.meter import LoopMeter
 
@@ -107,8 +109,11 @@ class TaskGroup:
             return
         failure = TaskFailure(owner, task.get_name(), error)
         self.failures.append(failure)
+        # afa's own errors say what happened in their message; anything else is a bug,
+        # and its traceback is where to start
         log.error("task %s of %s failed: %s: %s", task.get_name(), owner,
-                  type(error).__name__, error, exc_info=error)
+                  type(error).__name__, error,
+                  exc_info=None if isinstance(error, AfaError) else error)
         if self._on_failure is not None:
             self._on_failure(owner, error)
 

@@ -322,8 +322,8 @@ class TimeMaster(LockStep):
             self._acknowledged.set()
         elif op == "bye":
             self.departed.add(sender)
-            log.info("lock-step: %s ended the run at t=%.3f s", sender,
-                     self.clock.monotonic())
+            log.warning("lock-step: process %s stopped at t=%.3f s, which ends the run "
+                        "for every process", sender, self.clock.monotonic())
             self._ended = True
             self.system.request_stop()
             self._reports_in.set()

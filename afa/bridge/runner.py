@@ -70,3 +70,16 @@ def summary(system: Any) -> dict[str, Any]:
         if isinstance(service, Bridge):
             return {"bridge": service.statistics()}
     return {}
+
+
+def describe(system: Any) -> str | None:
+    """One line saying where the run's bridge listens and connects (None without one)."""
+    from afa.bridge.bridge import Bridge
+
+    for service in system.services:
+        if isinstance(service, Bridge):
+            p = service.parameters
+            return (f"bridge: process {service.process!r} of {service.robot!r}, listening on "
+                    f"{', '.join(p.Listen) or 'nothing'}, connecting to "
+                    f"{', '.join(p.Connect) or 'nothing'}")
+    return None

@@ -84,6 +84,9 @@ def test_the_split_raptor_drives_the_mission_as_one_process_does(
     assert split["bridge"]["lockstep"]["role"] == "master"
     assert other_half["bridge"]["lockstep"]["role"] == "follower"
     assert split["bridge"]["commands_refused"] == 0  # the arbiter may command: allowed
+    # each process says where its bridge listens
+    assert f"afa: bridge: process 'vehicle' of 'Raptor', listening on {endpoint(port)}, " \
+           "connecting to nothing" in vehicle.errors
 
 
 #: A mission of 25 m and two waypoints, about 55 s of simulated driving.

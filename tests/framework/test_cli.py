@@ -336,3 +336,23 @@ def test_a_run_in_which_nothing_drives_and_nothing_ends_is_refused(capsys):
     err = capsys.readouterr().err
     assert "world 'short-hop' has no <drive> script for --teleop" in err
     assert "--duration" in err
+
+
+def test_a_system_task_that_fails_mid_run_ends_it_with_one_line(monkeypatch, capsys):
+    """A task of the system failing mid-run (a peer of a split run going away, the
+    control station's mission) stops the run with exit 1 and one line naming it; it
+    used to leave the run's task scope as an exception group, printed as a 60-line
+    traceback with the line buried in it."""
+    from afa.errors import ComponentError
+    from components.simulation import RaptorSimulation
+
+    async def broken_geofence(self, global_map):
+        raise ComponentError("the operator's mission area is broken")
+
+    monkeypatch.setattr(RaptorSimulation, "_geofence", broken_geofence)
+    assert main(["run", str(RAPTOR), "--sim", "--fast", "--world", "short-hop",
+                 "--duration", "30"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "ExceptionGroup" not in err
+    stopped = [line for line in err.splitlines() if line.startswith("afa run: stopped:")]
+    assert len(stopped) == 1 and "the operator's mission area is broken" in stopped[0]
