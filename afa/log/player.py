@@ -580,6 +580,7 @@ class Player:
                     return
                 first = self.first
                 self._seek_state(first)
+                await self._start_over()
                 self._republish(first)
         finally:
             for handle in handles:
@@ -827,11 +828,22 @@ class Player:
                 await self._feeder
             except asyncio.CancelledError:
                 pass
+        back = fmt.from_ns(target) < self.position
         self._seek_state(target)
+        if back:
+            await self._start_over()
         await self._launch_all()
         self._republish(target)
         self._feeder = self.system.tasks.spawn(self._feed(target), owner="player")
         await asyncio.sleep(0)
+
+    async def _start_over(self) -> None:
+        """Before going back in the recording: restart every running re-run component,
+        so that none keeps what it made of later times (queued events stamped after the
+        target, a pose buffer ahead of the scans, a map) into the earlier stretch."""
+        for component in self.rerun:
+            if component.name in self.system.components and component.name not in self._pending:
+                await self.system.restart_component(component.name)
 
     def _seek_state(self, target: int) -> None:
         stamp = fmt.from_ns(target)

@@ -221,6 +221,11 @@ class VoteArbiter:
         """Behaviours with a vote in the book (fresh as of the last decision)."""
         return tuple(sorted(self._book))
 
+    @property
+    def ever_voted(self) -> bool:
+        """Whether any behaviour has voted into this book (stale votes included)."""
+        return bool(self._seen)
+
     def latest(self, behaviour: str) -> ArcVoteIDL | None:
         """The kept vote of ``behaviour``, if any."""
         entry = self._book.get(behaviour)

@@ -235,7 +235,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         stays until a command goes through."""
         if self._health_detail.startswith("setVelocity"):
             return
-        if decision.failsafe == "no-fresh-vote" and self.counters["votes"]:  # (before
+        if decision.failsafe == "no-fresh-vote" and self.book.ever_voted:  # (before
             # the first vote the required input says "waiting for")
             self.set_health(False, "stopped: no behaviour has a fresh vote")
         elif decision.failsafe == "missing-required":

@@ -89,6 +89,9 @@ class TraversabilityMap(SubscribePublishServer[TraversabilityMapParameters]):
         self.latest_ego = self.slot("egocentric traversability map")
         self._filling_since = self.clock.monotonic()
         self.bad_input.clear()
+        # a restart (after a failure, or a replay going back) starts from no terrain
+        self.terrain = self.ego_terrain = None
+        self._global_seen, self._ego_seen = LastSeenTracker(), LastSeenTracker()
 
     async def run(self) -> None:
         async for _ in self.clock.periodic(self.parameters.MapEventInterval):

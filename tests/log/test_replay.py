@@ -2,6 +2,7 @@
 GPS and IMU reproduces the recorded poses; a changed parameter diverges; recorded servers
 answer polls; pause, step, seek and speed."""
 
+import asyncio
 import hashlib
 from pathlib import Path
 
@@ -219,6 +220,30 @@ async def test_pause_step_seek_and_speed(recorded):
         player.resume()
         await player.run()
         assert player.elapsed > 11.0
+
+
+async def test_a_loop_starts_the_re_run_components_afresh(recorded):
+    """Going back to ``--start`` (or seeking back) must not feed the re-run components
+    the earlier stretch on top of what they made of the later one: a pose buffer ahead
+    of every scan dropped the scans ("older than the pose buffer"), a terrain map kept
+    from the end stamped the Traversability Map's next map in the future, and the
+    Global Map refused it, on every pass."""
+    # passes of 11 s: the maps publish once they have filled again (MapUpdateTime 7 s)
+    player = Player(recorded, speed=None, start=0.5, end=11.5, loop=True)
+    async with player:
+        runner = asyncio.ensure_future(player.run())
+        await player.clock.sleep(28.0)  # two and a half passes
+        terrain = player.system.components["TerrainService"]
+        scans = terrain.counters["scans"]
+        await player.seek(1.0)  # and back by hand, mid-pass
+        await player.clock.sleep(9.0)
+        runner.cancel()
+        await asyncio.gather(runner, return_exceptions=True)
+        assert terrain.counters["scans"] > scans  # scans were fused after every wrap
+        assert terrain.counters["too_old"] == 0 and terrain.counters["future_dropped"] == 0
+        maps = player.system.components["TraverseService"]
+        assert maps.counters["maps_published"] > 0 and maps.counters["future_maps"] == 0
+        assert player.system.components["GlobalMapService"].counters["future_maps"] == 0
 
 
 def test_only_and_skip_name_components_or_topics(recorded):
