@@ -81,7 +81,8 @@ def _parser(prog: str = "afa") -> argparse.ArgumentParser:
     run.add_argument("--sim", action="store_true", help="run against the simulated world")
     run.add_argument("--world", help="world for --sim: a file, or the name of a shipped world "
                                       f"({', '.join(_shipped_worlds()) or 'none found'})")
-    run.add_argument("--duration", type=float, help="stop after this many seconds (clock time)")
+    run.add_argument("--duration", type=float,
+                     help="stop this many seconds (clock time) after the stack has started")
     run.add_argument("--seed", type=int, default=0, help="random seed for the simulation")
     run.add_argument("--fast", action="store_true",
                      help="virtual time, as fast as possible (needs --sim)")

@@ -260,6 +260,12 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    for peer in ("pyee", "blinker"):  # the contenders beside afa's channel
+        try:
+            __import__(peer)
+        except ModuleNotFoundError:
+            sys.exit(f"benchmarks/bus.py: {peer} is not installed; the peers come with "
+                     "pip install -e '.[dev]'")
     results = measure(args.events, args.repeat)
     polls = asyncio.run(bench_polls(max(1000, args.events // 20)))
     floor = results["asyncio.Queue (floor)"]

@@ -33,14 +33,19 @@ PANES = {"maps": "maps", "localmap": "local-map", "pose": "pose",
          "scene": "body-frames-and-range-points", "vehicle": "vehicle-and-health"}
 
 
-async def main() -> None:
+def arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--world", default="rock-field")
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "console")
     parser.add_argument("--chromium", default="/usr/bin/chromium")
-    args = parser.parse_args()
+    parser.add_argument("--replay-only", action="store_true",
+                        help="only the Replay pane (on a recording of a 20 s run)")
+    return parser.parse_args()
+
+
+async def main(args: argparse.Namespace) -> None:
     logging.basicConfig(level=logging.ERROR)
     clock = VirtualClock()
     simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml",
@@ -112,8 +117,10 @@ async def replay_pane(recording: Path, out: Path, chromium: str) -> None:
 if __name__ == "__main__":
     import tempfile
 
-    if "--replay-only" not in sys.argv:
-        asyncio.run(main())
+    options = arguments()
+    if not options.replay_only:
+        asyncio.run(main(options))
+    options.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        asyncio.run(replay_pane(record(Path(tmp) / "mission.mcap"), ROOT / "docs" / "console",
-                                "/usr/bin/chromium"))
+        asyncio.run(replay_pane(record(Path(tmp) / "mission.mcap"), options.out,
+                                options.chromium))
