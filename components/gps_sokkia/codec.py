@@ -1461,8 +1461,8 @@ def latlon_to_grid_near(latitude_deg: float, longitude_deg: float, easting_m: fl
     point just east of 9° E is in zone 33 while the ground just west of it is in 31."""
     own = latlon_to_utm(latitude_deg, longitude_deg)
     band = min(int((float(longitude_deg) + 180.0) // 6.0) + 1, 60)
-    zones = {z % 60 + 1 for centre in (own.zone_number, band) for z in (centre - 2, centre - 1,
-                                                                        centre)}
+    zones = {(centre - 1 + step) % 60 + 1 for centre in (own.zone_number, band)
+             for step in (-1, 0, 1)}  # each centre and its neighbours, 60 next to 1
     best, best_distance = own, math.inf
     for zone in sorted(zones):
         for hemisphere in ("N", "S"):
