@@ -84,6 +84,10 @@ def _build(config: Configuration, entry: LauncherEntry, cls: type[Component[Any]
     except AfaError as exc:
         problems.append(f"{where}: {exc}")
         return None
+    except (ValueError, ArithmeticError, MemoryError) as exc:  # what its parameters make
+        problems.append(f"{where}: section {entry.Section!r} cannot configure {entry.Type}: "
+                        f"{type(exc).__name__}: {exc}")
+        return None
     component.type_name = entry.Type
     if not entry.Restart:
         component.restart_policy = RestartPolicy(restart=False)  # type: ignore[misc]

@@ -14,9 +14,9 @@ import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import ValidationError, field_validator
+from pydantic import Field, ValidationError, field_validator
 
 from afa.bridge.parameters import BridgeParameters
 from afa.config.miro import ParameterSet, Section, read_document
@@ -41,6 +41,14 @@ class RobotParameters(Parameters):
     namespace = "Miro"
     Name: str = param("Miro", description="The robot's name: naming context and event domain")
 
+    @field_validator("Name")
+    @classmethod
+    def _one_word(cls, value: str) -> str:
+        if not value.strip() or "/" in value or value != value.strip():
+            raise ValueError("the robot's name is the first part of every '<Robot>/<Name>': "
+                             "not empty, no '/' and no surrounding spaces")
+        return value
+
 
 class LauncherEntry(Parameters):
     """One component the Launcher starts (seed Table 34, Figure 19)."""
@@ -51,8 +59,9 @@ class LauncherEntry(Parameters):
     Section: str = param("", description="Configuration section holding its parameters")
     Instance: str = param("", description="Named instance in that section ('' = default set)")
     Enabled: bool = param(True, description="Component is in the autolaunch group")
-    Period: float = param(0.0, unit="s",
-                          description="Delay before launching the next component (dT)")
+    Period: Annotated[float, Field(ge=0.0, le=600.0)] = param(
+        0.0, unit="s", description="Delay before launching the next component (dT); at most "
+                                   "600 s (start-up waits for it before a run can be stopped)")
     Restart: bool = param(True, description="Restart the component with backoff when it fails")
     Process: str = param("", description="Process group: `afa run CONFIG --process NAME` runs "
                                          "only the entries of group NAME ('' is the group "

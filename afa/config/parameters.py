@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
-__all__ = ["Parameters", "param", "parameter_types"]
+__all__ = ["Parameters", "param", "parameter_types", "check_grid", "MAX_GRID_CELLS"]
 
 _REGISTRY: dict[str, type[Parameters]] = {}
 
@@ -35,9 +35,11 @@ def param(default: Any = ..., *, unit: str = "", description: str = "") -> Any:
 
 
 class Parameters(BaseModel):
-    """Base of every parameter model."""
+    """Base of every parameter model. Numbers must be finite (NaN and infinity are
+    refused, with the parameter's line) unless a field says otherwise
+    (``Field(allow_inf_nan=True)``)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     namespace: ClassVar[str] = "Raptor"
     miro_type: ClassVar[str] = ""
@@ -61,3 +63,24 @@ class Parameters(BaseModel):
                 raise ValueError(f"a bool is written exactly 'true' or 'false', not {value!r}")
             return value == "true"
         return value
+
+
+#: Cells one configured grid may hold (2048 × 2048: 250 m at 0.125 m). A map is allocated
+#: when its component is built, so a larger grid is refused with the parameter's line
+#: instead of exhausting memory; the shipped grids hold at most 250,000 cells.
+MAX_GRID_CELLS = 1 << 22
+
+
+def check_grid(model: Parameters, *grids: tuple[str, str]) -> None:
+    """Check ``model``'s grids, each named by its (depth, width) fields in mm, against its
+    ``Gridsize`` (mm): whole cells and at most :data:`MAX_GRID_CELLS`. Raises ValueError."""
+    gridsize = model.Gridsize  # type: ignore[attr-defined]
+    for depth_name, width_name in grids:
+        for name in (depth_name, width_name):
+            if getattr(model, name) % gridsize:
+                raise ValueError(f"{name} ({getattr(model, name)} mm) is not a whole number "
+                                 f"of Gridsize ({gridsize} mm) cells")
+        cells = (getattr(model, depth_name) // gridsize) * (getattr(model, width_name) // gridsize)
+        if cells > MAX_GRID_CELLS:
+            raise ValueError(f"{depth_name} × {width_name} at Gridsize {gridsize} mm is "
+                             f"{cells:,} cells, more than {MAX_GRID_CELLS:,}")

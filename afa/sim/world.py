@@ -572,6 +572,8 @@ def _check_raster_work(r: _Reader, items: tuple[Obstacle, ...],
     by_line = {e.sourceline: e for e in elements}
     total = 0
     for obstacle in items:
+        if not _on_terrain(terrain, obstacle.east, obstacle.north):
+            continue  # reported already ("must be on the terrain"); no window to bound
         element = by_line.get(obstacle.line)
         count = raster_cells(obstacle, terrain)
         if count > MAX_OBSTACLE_CELLS:
@@ -590,7 +592,9 @@ def _check_raster_work(r: _Reader, items: tuple[Obstacle, ...],
 def _read_origin(r: _Reader, e: etree._Element) -> Origin:
     r.check_attributes(e, ("latitude", "longitude"), ("elevation",))
     r.no_children(e)
-    return Origin(latitude=r.number(e, "latitude", minimum=-89.0, maximum=89.0),
+    # UTM (the receiver's and the pose's grid) ends at 80 S and 84 N; the margin keeps
+    # the whole terrain (at most 5 km across) inside it
+    return Origin(latitude=r.number(e, "latitude", minimum=-79.9, maximum=83.9),
                   longitude=r.number(e, "longitude", minimum=-180.0, maximum=180.0),
                   elevation=r.number(e, "elevation", 0.0, minimum=ELEVATION_RANGE[0],
                                      maximum=ELEVATION_RANGE[1]))
@@ -682,7 +686,7 @@ def _read_mission(r: _Reader, e: etree._Element | None, origin: Origin,
         r.no_children(child)
         keys = set(child.attrib)
         if keys == {"latitude", "longitude"}:
-            lat = r.number(child, "latitude", minimum=-89.0, maximum=89.0)
+            lat = r.number(child, "latitude", minimum=-79.9, maximum=83.9)
             lon = r.number(child, "longitude", minimum=-180.0, maximum=180.0)
             if math.isnan(lat + lon + origin.latitude + origin.longitude + origin.elevation):
                 continue

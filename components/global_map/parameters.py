@@ -13,7 +13,7 @@ from typing import Annotated
 
 from pydantic import Field, model_validator
 
-from afa.config.parameters import Parameters, param
+from afa.config.parameters import Parameters, check_grid, param
 
 __all__ = ["GlobalMapParameters"]
 
@@ -60,8 +60,5 @@ class GlobalMapParameters(Parameters):
 
     @model_validator(mode="after")
     def _whole_cells(self) -> GlobalMapParameters:
-        for name in ("Depth", "Width"):
-            if getattr(self, name) % self.Gridsize:
-                raise ValueError(f"{name} ({getattr(self, name)} mm) is not a whole number "
-                                 f"of Gridsize ({self.Gridsize} mm) cells")
+        check_grid(self, ("Depth", "Width"))
         return self

@@ -88,7 +88,7 @@ class ObstacleAvoidanceParameters(Parameters):
                     "hazards too, so a hazard cell's obstacle lies half a cell or more "
                     "beyond its centre (0.25 m at its 0.5 m cells); 0 is the seed's "
                     "conservative reading, a hazard anywhere in its cell")
-    VetoDistance: Annotated[float, Field(gt=0)] = param(
+    VetoDistance: Annotated[float, Field(gt=0, allow_inf_nan=True)] = param(
         2.5, unit="m",
         description="afa addition: an arc is vetoed when its first obstacle lies within "
                     "this much rear-axle travel; a farther obstacle only shortens its free "

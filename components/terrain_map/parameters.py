@@ -14,7 +14,7 @@ from typing import Annotated
 
 from pydantic import Field, model_validator
 
-from afa.config.parameters import Parameters, param
+from afa.config.parameters import Parameters, check_grid, param
 
 __all__ = ["TerrainMapParameters"]
 
@@ -83,8 +83,5 @@ class TerrainMapParameters(Parameters):
 
     @model_validator(mode="after")
     def _whole_cells(self) -> TerrainMapParameters:
-        for name in ("Depth", "Width", "EgoDepth", "EgoWidth"):
-            if getattr(self, name) % self.Gridsize:
-                raise ValueError(f"{name} ({getattr(self, name)} mm) is not a whole number "
-                                 f"of Gridsize ({self.Gridsize} mm) cells")
+        check_grid(self, ("Depth", "Width"), ("EgoDepth", "EgoWidth"))
         return self

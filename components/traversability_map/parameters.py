@@ -18,7 +18,7 @@ from typing import Annotated, Any
 
 from pydantic import Field, model_validator
 
-from afa.config.parameters import Parameters, param
+from afa.config.parameters import Parameters, check_grid, param
 
 __all__ = ["TraversabilityMapParameters", "MapDescription"]
 
@@ -36,10 +36,7 @@ class MapDescription(Parameters):
 
     @model_validator(mode="after")
     def _whole_cells(self) -> MapDescription:
-        for name in ("Depth", "Width"):
-            if getattr(self, name) % self.Gridsize:
-                raise ValueError(f"{name} ({getattr(self, name)} mm) is not a whole number "
-                                 f"of Gridsize ({self.Gridsize} mm) cells")
+        check_grid(self, ("Depth", "Width"))
         return self
 
 

@@ -188,6 +188,9 @@ def _line(path: Path, needle: str) -> int:
     '<obstacle type="box" east="0" north="0" length="1" width="1" height="1e308"/>',
     '<obstacle type="ditch" east="0" north="0" length="2" width="1" depth="1e308"/>',
     '<obstacle type="box" east="0" north="0" length="1" width="1" height="1" heading="1e308"/>',
+    # far off the terrain: reported as such, not rasterised (an OverflowError escaped)
+    '<obstacle type="box" east="1e308" north="0" length="1" width="1" height="1"/>',
+    '<obstacle type="cylinder" east="0" north="-1e308" radius="1" height="1"/>',
 ])
 def test_obstacle_sizes_have_an_upper_bound(tmp_path: Path, obstacle: str) -> None:
     path = _world(tmp_path, "  " + obstacle)
@@ -201,6 +204,48 @@ def test_obstacle_sizes_have_an_upper_bound(tmp_path: Path, obstacle: str) -> No
 ])
 def test_world_numbers_have_ranges(tmp_path: Path, attributes: dict[str, str]) -> None:
     _load_error(load_world, _world(tmp_path, **attributes))
+
+
+@pytest.mark.parametrize("latitude", ["85", "-85", "84", "-80"])
+def test_the_origin_lies_where_utm_does(tmp_path: Path, latitude: str) -> None:
+    """The receiver and the pose frame are in UTM, which ends at 84 N and 80 S: a world
+    beyond it loaded, and its run then failed in the simulated receiver."""
+    path = _world(tmp_path)
+    text = re.sub(r'latitude="[^"]*"', f'latitude="{latitude}"', path.read_text(), count=1)
+    path.write_text(text)
+    error = _load_error(load_world, path)
+    assert str(error).startswith(f"{path}:{_line(path, '<origin')}: "), error
+
+
+@pytest.mark.parametrize("section,name,value,message", [
+    ("NodLaserConfig", "Motorrates", "inf",
+     "NodLaserConfig/Laser11/Motorrates: Input should be a finite number"),
+    ("PurePursuit", "Lookahead", "nan", "PurePursuit/Lookahead: Input should be a finite"),
+    ("PurePursuit", "Lookahead", "1e308",
+     "Launcher purePursuit: section 'PurePursuit' cannot configure PurePursuit"),
+    ("GlobalMapConfig", "Gridsize", "10", "cells, more than 4,194,304"),
+    ("Robot", "Name", "", "Robot/Name: the robot's name"),
+    ("Launcher", "Period", "1e9", "Period: Input should be less than or equal to 600"),
+])
+def test_configured_numbers_that_would_break_a_component_are_refused(
+        tmp_path: Path, section: str, name: str, value: str, message: str) -> None:
+    """Values that used to load and then fail in a constructor with a traceback, allocate
+    hundreds of gigabytes (a 1 cm planning grid), or hold start-up for ever (a Launcher
+    Period of 1e9 s, which no signal interrupted): each a ConfigError at its line."""
+    from afa.assembly import build_components
+
+    lines = (CONFIGS / "raptor.xml").read_text().splitlines(keepends=True)
+    first = next(i for i, line in enumerate(lines) if f'<section name="{section}"' in line)
+    at = next(i for i in range(first, len(lines)) if f'name="{name}"' in lines[i])
+    lines[at] = re.sub(r'value="[^"]*"', f'value="{value}"', lines[at])
+    path = tmp_path / "raptor.xml"
+    path.write_text("".join(lines))
+    shutil.copy(CONFIGS / "050917raptor01.XML", tmp_path)
+    shutil.copytree(CONFIGS / "bodies", tmp_path / "bodies")
+    with pytest.raises(ConfigError) as caught:
+        build_components(load_configuration(path))
+    assert message in str(caught.value), caught.value
+    assert any(line.startswith(f"{path}:") for line in str(caught.value).splitlines())
 
 
 def test_too_many_obstacles_is_a_config_error(tmp_path: Path) -> None:
