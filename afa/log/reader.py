@@ -211,13 +211,35 @@ class LogReader:
         if summary.statistics is not None:
             self.counts = dict(summary.statistics.channel_message_counts)
         for index in summary.chunk_indexes:
-            self.chunks.append(ChunkRef(index.chunk_start_offset, index.chunk_length,
-                                        index.message_start_time, index.message_end_time,
-                                        frozenset(index.message_index_offsets)))
+            ref = ChunkRef(index.chunk_start_offset, index.chunk_length,
+                           index.message_start_time, index.message_end_time,
+                           frozenset(index.message_index_offsets))
+            problem = self._check_index_entry(ref)
+            if problem is None:
+                self.chunks.append(ref)
+            else:
+                self.problems.append(f"{self.path}: {problem}; that chunk is not read")
         for record in reader.iter_metadata():
             self.metadata[record.name] = dict(record.metadata)
         self.chunks.sort(key=lambda c: (c.start, c.offset))
         self.indexed = True
+
+    def _check_index_entry(self, ref: ChunkRef) -> str | None:
+        """What is wrong with a chunk index entry (None: a chunk record of its length and
+        times begins at its offset). A damaged entry would place data wrongly, hide it,
+        or have a read trust a length the file never held."""
+        f = self._file
+        f.seek(ref.offset)
+        head = f.read(_RECORD_HEAD.size + 16)
+        if len(head) < _RECORD_HEAD.size + 16:
+            return f"a chunk index entry points past the end (byte {ref.offset})"
+        opcode, length = _RECORD_HEAD.unpack_from(head)
+        start, end = struct.unpack_from("<QQ", head, _RECORD_HEAD.size)
+        if (opcode, _RECORD_HEAD.size + length, start, end) != (_OP_CHUNK, ref.length,
+                                                                 ref.start, ref.end):
+            return (f"the chunk index entry for byte {ref.offset} does not match the record "
+                    f"there (opcode {opcode}, {length} bytes)")
+        return None
 
     def _scan(self) -> None:
         """One pass over the records: the chunk index, channels, counts, metadata."""
@@ -380,8 +402,19 @@ class LogReader:
         if len(head) < _RECORD_HEAD.size:
             self.problems.append(f"{self.path}: the chunk at byte {ref.offset} is missing")
             return []
-        _, length = _RECORD_HEAD.unpack(head)
-        records = self._chunk_records(ref.offset, f.read(length), wanted)
+        opcode, length = _RECORD_HEAD.unpack(head)
+        if opcode != _OP_CHUNK or length > MAX_RECORD or _RECORD_HEAD.size + length != ref.length:
+            # the index points at something else (a damaged index or record header):
+            # trust neither with a read of the length it claims
+            self.problems.append(f"{self.path}: byte {ref.offset}: the index names a chunk of "
+                                 f"{ref.length} bytes, but the record there is opcode "
+                                 f"{opcode} of {length} bytes; skipped")
+            return []
+        content = f.read(length)
+        if len(content) < length:
+            self.problems.append(f"{self.path}: the chunk at byte {ref.offset} is cut short")
+            return []
+        records = self._chunk_records(ref.offset, content, wanted)
         return [] if records is None else records
 
     def messages(self, start: int | None = None, end: int | None = None,

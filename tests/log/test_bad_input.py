@@ -52,6 +52,45 @@ def test_a_corrupted_chunk_is_skipped_and_named_and_the_others_are_read(recorded
     assert 0 < read < total
 
 
+def _damage_record(data: bytearray, opcode: int, change) -> int:
+    """Apply ``change(data, content_start, length)`` to the first record of ``opcode``
+    (walking the records from the magic); its offset."""
+    at = len(b"\x89MCAP0\r\n")
+    while True:
+        op, length = data[at], int.from_bytes(data[at + 1:at + 9], "little")
+        if op == opcode:
+            change(data, at + 9, length)
+            return at
+        at += 9 + length
+
+
+@pytest.mark.parametrize("damage", ["chunk length", "zeroed index entry"])
+def test_a_damaged_chunk_length_or_index_entry_costs_one_chunk(recorded, tmp_path, damage):
+    """A chunk record claiming 2^64 - 1 bytes, or a chunk index entry zeroed (pointing at
+    the magic, which then reads as a record of 7e16 bytes), made every reading tool fail
+    with OverflowError or MemoryError: the index entry is checked against the record it
+    names, and a mismatch costs that chunk, named, and nothing else."""
+    with LogReader(recorded) as reader:
+        chunks, total = len(reader.chunks), sum(1 for _ in reader.messages())
+    data = bytearray(recorded.read_bytes())
+    if damage == "chunk length":
+        def change(d, start, length):
+            d[start - 8:start] = (2**64 - 1).to_bytes(8, "little")
+        _damage_record(data, 6, change)
+    else:
+        def change(d, start, length):
+            d[start:start + length] = bytes(length)
+        _damage_record(data, 8, change)
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    with LogReader(bad) as reader:
+        assert reader.indexed and len(reader.chunks) == chunks - 1
+        assert any("does not match the record there" in p and "not read" in p
+                   for p in reader.problems), reader.problems
+        read = sum(1 for _ in reader.messages())
+        assert 0 < read < total and reader.duration > 0
+
+
 def _rewrite(source, target, change):
     """Copy a recording, changing schemas/channels/messages through ``change``."""
     from mcap.writer import Writer
