@@ -377,18 +377,22 @@ def read_recording(path: str | os.PathLike[str]
                    ) -> tuple[NDArray[np.float32], NDArray[np.float64], CameraModel]:
     """Read a recording: ``(disparity (N, rows, cols), times (N,), model)``. Raises
     EDevIO if the file is missing, not a recording, or inconsistent."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
+    try:  # (our own handle: np.load leaves its file open when the archive is broken)
+        with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as data:
             fmt = str(data["format"])
             disparity = np.asarray(data["disparity"], dtype=np.float32)
             times = np.asarray(data["times"], dtype=np.float64)
             scalars = {k: float(data[k]) for k in ("focal_px", "baseline_m", "cx", "cy")}
-    except (OSError, KeyError, ValueError, EOFError) as exc:
-        raise EDevIO(f"{path}: cannot read the recording: {exc}") from exc
+    except Exception as exc:  # a damaged archive fails in zipfile, zlib, numpy's header
+        # parser or a conversion: whatever it is, the file is not a usable recording
+        raise EDevIO(f"{path}: cannot read the recording: {type(exc).__name__}: {exc}"
+                     ) from exc
     if fmt != RECORDING_FORMAT:
         raise EDevIO(f"{path}: format {fmt!r}, expected {RECORDING_FORMAT!r}")
     if disparity.ndim != 3 or times.shape != (disparity.shape[0],):
         raise EDevIO(f"{path}: disparity {disparity.shape} and times {times.shape} disagree")
+    if not (np.all(np.isfinite(times)) and np.all(np.diff(times) > 0)):
+        raise EDevIO(f"{path}: frame times must be finite and increasing")
     try:
         model = CameraModel(disparity.shape[2], disparity.shape[1], **scalars)
     except ValueError as exc:

@@ -111,6 +111,26 @@ async def test_recordings_that_are_missing_or_foreign_are_edevio(tmp_path):
         await RecordedBackend(tmp_path / "other.npz").open()
 
 
+async def test_damaged_recordings_are_edevio(tmp_path):
+    """A truncated or bit-flipped archive failed in zipfile or zlib (BadZipFile, not
+    EDevIO), so the Stereo component failed to start instead of reporting no camera; so
+    did times that run backwards."""
+    path = tmp_path / "two.npz"
+    frames = [DisparityFrame(np.full((240, 320), 5.0, dtype=np.float32), 50.0 + k, k)
+              for k in range(2)]
+    write_recording(path, frames, SIMPLE)
+    data = path.read_bytes()
+    (tmp_path / "cut.npz").write_bytes(data[: len(data) // 2])
+    flipped = bytearray(data)
+    for k in range(200, len(flipped), 97):
+        flipped[k] ^= 0x5A
+    (tmp_path / "flipped.npz").write_bytes(bytes(flipped))
+    write_recording(tmp_path / "backwards.npz", frames[::-1], SIMPLE)
+    for name in ("cut.npz", "flipped.npz", "backwards.npz"):
+        with pytest.raises(EDevIO, match=name):
+            await RecordedBackend(tmp_path / name).open()
+
+
 # -- the component ------------------------------------------------------------------------
 async def test_frames_are_published_at_frame_rate_under_the_event_name():
     clock = VirtualClock(start=T0)
