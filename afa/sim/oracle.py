@@ -29,10 +29,15 @@ from afa.sim.terrain import Terrain
 from afa.sim.vehicle import VehicleParameters
 from afa.sim.world import World
 
-__all__ = ["HazardField", "Course", "shortest_course"]
+__all__ = ["HazardField", "Course", "shortest_course", "ORACLE_RESOLUTION", "ORACLE_MAX_CELLS"]
 
 #: Grid spacing of the course oracle (m).
 ORACLE_RESOLUTION = 0.25
+#: Cells of the oracle's grid at most (each costs ~1 kB while the graph is built): a
+#: larger terrain is planned at a coarser spacing (the shipped worlds, at most 200 m
+#: square, are planned at ORACLE_RESOLUTION; a 5 km terrain at 0.25 m was 4e8 cells and
+#: exhausted memory at the end of every run).
+ORACLE_MAX_CELLS = 1_000_000
 _MOVES = [(1, 0), (0, 1), (-1, 0), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1),
           (1, 2), (2, 1), (-1, 2), (-2, 1), (1, -2), (2, -1), (-1, -2), (-2, -1)]
 
@@ -85,8 +90,9 @@ class Course:
 def shortest_course(world: World, field: HazardField, *, half_width: float | None = None,
                     resolution: float = ORACLE_RESOLUTION) -> Course:
     """Shortest collision-free course from the vehicle's start through every mission
-    waypoint in order (once; patrol missions are judged on one lap). Raises ValueError
-    for a world without waypoints."""
+    waypoint in order (once; patrol missions are judged on one lap), on a grid of
+    ``resolution`` spacing, or coarser where the terrain needs more than
+    :data:`ORACLE_MAX_CELLS` cells. Raises ValueError for a world without waypoints."""
     waypoints = world.mission.waypoints
     if not waypoints:
         raise ValueError(f"world {world.name!r} has no mission waypoints")
@@ -94,6 +100,8 @@ def shortest_course(world: World, field: HazardField, *, half_width: float | Non
             else VehicleParameters().body_width / 2.0)
     t = field.terrain
     east0, east1, north0, north1 = t.extent
+    resolution = max(resolution, math.sqrt((east1 - east0) * (north1 - north0)
+                                           / ORACLE_MAX_CELLS))
     nx = int(math.floor((east1 - east0) / resolution)) + 1
     ny = int(math.floor((north1 - north0) / resolution)) + 1
     ge = east0 + resolution * np.arange(nx)
