@@ -58,7 +58,7 @@ from afa.transport import AsyncioByteStream, DeviceFactory, PtyDeviceStream, ope
 from components.gps_sokkia.codec import latlon_to_grid_near, latlon_to_utm
 from components.map_quality import map_summary
 from components.model_server.geometry import GeometryModel
-from components.waypoints import reached, to_local
+from components.waypoints import VEHICLE_FRAME, reached, to_local
 from idl import (
     ArcVoteIDL,
     PlanningBoundaryIDL,
@@ -78,7 +78,6 @@ log = logging.getLogger("afa.sim")
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 DEFAULT_WORLD = CONFIGS / "worlds" / "open-field.xml"
-VEHICLE_FRAME = "Raptor:RearAxleCenter"
 #: A waypoint counts as reached when the rear axle or the middle of the front bumper (the
 #: points the Global Map and the behaviours judge by) passes within this distance (m).
 WAYPOINT_TOLERANCE = 3.0

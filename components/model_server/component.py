@@ -35,11 +35,11 @@ from components.model_server.pose_filter import (
     RawPose,
     enu_attitude_from_ned,
 )
+from components.waypoints import VEHICLE_FRAME
 from idl import GpsIDL, ImuIDL, Platform, PoseTransformIDL, StringSequenceIDL, TimeIDL, WheelDataIDL
 
 __all__ = ["ModelServer", "VEHICLE_FRAME", "ANTENNA_FRAME", "IMU_FRAME"]
 
-VEHICLE_FRAME = "Raptor:RearAxleCenter"
 ANTENNA_FRAME = "GpsAntenna:PhaseCenter"
 IMU_FRAME = "Imu:SensorCenter"
 #: The Raptor's geometry model that afa ships (the default ModelFileName names it).

@@ -24,12 +24,12 @@ from afa.errors import AfaError
 from components.arcs import ARC_SET_SECTION, ArcSet, arc_set_of
 from components.obstacle_avoidance.parameters import ObstacleAvoidanceParameters
 from components.obstacle_avoidance.sweep import ArcSweeper, SweepScores
+from components.waypoints import VEHICLE_FRAME
 from idl import ArcVoteIDL, EtravMapArrayEventIDL, Platform, TimeIDL
 
 __all__ = ["ObstacleAvoidance", "BEHAVIOUR", "VEHICLE_FRAME"]
 
 BEHAVIOUR = "ObstacleAvoidance"
-VEHICLE_FRAME = "Raptor:RearAxleCenter"
 
 
 class ObstacleAvoidance(SubscribePublishServer[ObstacleAvoidanceParameters]):

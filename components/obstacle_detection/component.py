@@ -28,12 +28,12 @@ from afa.errors import AfaError
 from components.arcs import ARC_SET_SECTION, ArcSet, arc_set_of
 from components.obstacle_detection.detect import ObstacleDetector
 from components.obstacle_detection.parameters import ObstacleDetectionParameters
+from components.waypoints import VEHICLE_FRAME
 from idl import ArcVoteIDL, Platform, Range3dLaserIDL, Range3dSeqEventIDL, TimeIDL
 
 __all__ = ["ObstacleDetection", "BEHAVIOUR", "VEHICLE_FRAME"]
 
 BEHAVIOUR = "ObstacleDetection"
-VEHICLE_FRAME = "Raptor:RearAxleCenter"
 #: A clear vote goes out at most this often (s), Pure Pursuit's rate; far inside
 #: ``StaleVoteTime`` (1.5 s). Halts, and the first clear vote after one, go out at once.
 CLEAR_REFRESH = 0.1

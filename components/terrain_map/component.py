@@ -72,6 +72,7 @@ from components.terrain_map.grid import (
 from components.terrain_map.parameters import TerrainMapParameters
 from components.terrain_map.stabiliser import PoseStabiliser
 from components.trusted import trusted
+from components.waypoints import VEHICLE_FRAME
 from idl import (
     EgoMapArrayEventIDL,
     EgoMapSeqEventIDL,
@@ -90,7 +91,6 @@ from idl import (
 
 __all__ = ["TerrainMap", "VEHICLE_FRAME", "PENDING_LIMIT", "POSE_BUFFER", "EXTREMES_WINDOW"]
 
-VEHICLE_FRAME = "Raptor:RearAxleCenter"
 #: A scan newer than the newest pose waits this long (s) for the pose that follows it.
 PENDING_LIMIT = 0.5
 #: Poses kept for placing scans (ModelServer publishes ~14 a second: ~18 s).
