@@ -18,16 +18,21 @@ the ground under the front bumper (``GroundFrame``, whose place on the vehicle
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 
+from afa import EOutOfBounds
+from afa.errors import AfaError
 from components.gps_sokkia.codec import latlon_to_grid_near
 from idl import Platform, WaypointIDL
 
 __all__ = ["to_local", "all_to_local", "reached", "ground_point", "VEHICLE_FRAME"]
 
-#: The frame of the pose ModelServer publishes: the rear axle's centre.
+#: The frame of the pose ModelServer publishes: the rear axle's centre (the one name
+#: every component uses; afa/ keeps its own copies, as it may not import components).
 VEHICLE_FRAME = "Raptor:RearAxleCenter"
 
 
@@ -61,11 +66,19 @@ def reached(x: float, y: float, c: float, s: float, front: tuple[float, float],
             <= r2)
 
 
-async def ground_point(platform: Platform, frame: str) -> tuple[float, float]:
+async def ground_point(platform: Platform, frame: str, log: logging.Logger
+                       ) -> tuple[float, float] | Literal[False] | None:
     """Where ``frame`` (the ground under the front bumper) lies on the vehicle: (ahead,
-    left) of the rear axle, m, from ModelServer's ``getTransformation``. Raises what the
-    poll raises: EOutOfBounds for a frame ModelServer does not know, another AfaError
-    while it is not reachable."""
-    transform = await platform.getTransformation(VEHICLE_FRAME, frame)
+    left) of the rear axle, m, from ModelServer's ``getTransformation``; False, logged as
+    a warning, when ModelServer does not know the frame (arrival is then judged by the
+    rear axle alone); None while ModelServer is not reachable (ask again later)."""
+    try:
+        transform = await platform.getTransformation(VEHICLE_FRAME, frame)
+    except EOutOfBounds as exc:
+        log.warning("ModelServer does not know the frame %r (%s): waypoints are reached by "
+                    "the rear axle only", frame, exc)
+        return False
+    except AfaError:
+        return None
     h = np.asarray(transform.HTransform, dtype=np.float64)
     return float(h[0, 3]), float(h[1, 3])

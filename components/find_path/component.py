@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from afa import EOutOfBounds, SubscribePublishServer
+from afa import SubscribePublishServer
 from afa.diagnostics import Stopwatch
 from afa.errors import AfaError
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
@@ -469,17 +469,10 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         """Where ``GroundFrame`` sits on the vehicle, from ModelServer (polled until it
         answers; a frame it does not know leaves the rear axle as the only arrival
         point, and the component unhealthy: its health names the frame)."""
-        frame = self.parameters.GroundFrame
-        try:
-            self.front = await ground_point(self.platform, frame)
-        except EOutOfBounds as exc:
-            self.log.warning("%s: ModelServer does not know the frame %r (%s): arrival "
-                             "is judged by the rear axle only", self.name, frame, exc)
-            self.front = False
+        self.front = await ground_point(self.platform, self.parameters.GroundFrame, self.log)
+        if self.front is False:
             self.counters["unknown_frames"] += 1
-            return
-        except AfaError:
-            return  # not reachable yet: the next cycle asks again
+        # None: not reachable yet, the next cycle asks again
 
     def _lookahead(self, points: list[tuple[float, float]], vehicle: tuple[float, float],
                    gridsize: float) -> tuple[float, float]:

@@ -24,8 +24,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from afa import EOutOfBounds, Event, SubscribePublishServer
-from afa.errors import AfaError
+from afa import Event, SubscribePublishServer
 from components.arcs import ARC_SET_SECTION, ArcSet, ArcVotes, arc_set_of
 from components.pure_pursuit.parameters import PurePursuitParameters
 from components.pure_pursuit.pursuit import PurePursuit as PursuitCore
@@ -93,23 +92,16 @@ class PurePursuit(SubscribePublishServer[PurePursuitParameters]):
         docstring): asked once a vote period until it answers, beside the votes (a slow
         answer never delays one)."""
         frame = self.parameters.GroundFrame
-        while self.front_known is None:
-            try:
-                front = await ground_point(self.platform, frame)
-            except EOutOfBounds as exc:
-                self.log.warning("%s: ModelServer does not know the frame %r (%s): "
-                                 "waypoints are reached by the rear axle only", self.name,
-                                 frame, exc)
-                self.front_known = False
-                self.counters["unknown_frames"] += 1
-                self.set_health(False, f"ModelServer does not know GroundFrame {frame!r}: "
-                                       "waypoints are reached by the rear axle only")
-                return
-            except AfaError:
-                await self.clock.sleep(VOTE_PERIOD)  # not reachable yet: ask again
-                continue
-            self.core.set_front(*front)
-            self.front_known = True
+        while (front := await ground_point(self.platform, frame, self.log)) is None:
+            await self.clock.sleep(VOTE_PERIOD)  # not reachable yet: ask again
+        if front is False:
+            self.front_known = False
+            self.counters["unknown_frames"] += 1
+            self.set_health(False, f"ModelServer does not know GroundFrame {frame!r}: "
+                                   "waypoints are reached by the rear axle only")
+            return
+        self.core.set_front(*front)
+        self.front_known = True
 
     def _on_pose(self, event: Event) -> None:
         pose: PoseTransformIDL = event.body  # type: ignore[assignment]
