@@ -397,22 +397,12 @@ class LogReader:
 
     def _load(self, ref: ChunkRef, wanted: frozenset[int] | None = None) -> list[Any]:
         f = self._file
-        f.seek(ref.offset)
-        head = f.read(_RECORD_HEAD.size)
-        if len(head) < _RECORD_HEAD.size:
+        # a ref's record was checked when the file was opened (_check_index_entry, or
+        # _scan, which made the ref from it): a chunk record of ref.length bytes
+        f.seek(ref.offset + _RECORD_HEAD.size)
+        content = f.read(ref.length - _RECORD_HEAD.size)
+        if len(content) < ref.length - _RECORD_HEAD.size:
             self.problems.append(f"{self.path}: the chunk at byte {ref.offset} is missing")
-            return []
-        opcode, length = _RECORD_HEAD.unpack(head)
-        if opcode != _OP_CHUNK or length > MAX_RECORD or _RECORD_HEAD.size + length != ref.length:
-            # the index points at something else (a damaged index or record header):
-            # trust neither with a read of the length it claims
-            self.problems.append(f"{self.path}: byte {ref.offset}: the index names a chunk of "
-                                 f"{ref.length} bytes, but the record there is opcode "
-                                 f"{opcode} of {length} bytes; skipped")
-            return []
-        content = f.read(length)
-        if len(content) < length:
-            self.problems.append(f"{self.path}: the chunk at byte {ref.offset} is cut short")
             return []
         records = self._chunk_records(ref.offset, content, wanted)
         return [] if records is None else records
