@@ -62,24 +62,25 @@ def system_options(args: argparse.Namespace) -> dict[str, Any]:
     return options
 
 
-def summary(system: Any) -> dict[str, Any]:
-    """The bridge's part of a run summary (``bridge``: its counters), if it has one."""
+def _bridge(system: Any) -> Any:
+    """The run's Bridge service, or None."""
     from afa.bridge.bridge import Bridge
 
-    for service in system.services:
-        if isinstance(service, Bridge):
-            return {"bridge": service.statistics()}
-    return {}
+    return next((s for s in system.services if isinstance(s, Bridge)), None)
+
+
+def summary(system: Any) -> dict[str, Any]:
+    """The bridge's part of a run summary (``bridge``: its counters), if it has one."""
+    bridge = _bridge(system)
+    return {} if bridge is None else {"bridge": bridge.statistics()}
 
 
 def describe(system: Any) -> str | None:
     """One line saying where the run's bridge listens and connects (None without one)."""
-    from afa.bridge.bridge import Bridge
-
-    for service in system.services:
-        if isinstance(service, Bridge):
-            p = service.parameters
-            return (f"bridge: process {service.process!r} of {service.robot!r}, listening on "
-                    f"{', '.join(p.Listen) or 'nothing'}, connecting to "
-                    f"{', '.join(p.Connect) or 'nothing'}")
-    return None
+    bridge = _bridge(system)
+    if bridge is None:
+        return None
+    p = bridge.parameters
+    return (f"bridge: process {bridge.process!r} of {bridge.robot!r}, listening on "
+            f"{', '.join(p.Listen) or 'nothing'}, connecting to "
+            f"{', '.join(p.Connect) or 'nothing'}")
