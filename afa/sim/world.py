@@ -46,7 +46,7 @@ __all__ = [
     "Waypoint", "Mission", "DriveCommand", "load_world", "parse_world", "raster_window",
     "raster_cells", "terrain_cells", "MAX_WORLD_BYTES", "MAX_TERRAIN_CELLS", "MAX_OBSTACLES",
     "MAX_OBSTACLE_CELLS", "MAX_RASTER_CELLS", "MAX_WAYPOINTS", "MAX_DRIVE_COMMANDS",
-    "MAX_DRIVE_TIME", "WGS84_A", "WGS84_F",
+    "MAX_DRIVE_TIME", "LATITUDE_RANGE", "WGS84_A", "WGS84_F",
 ]
 
 #: World files larger than this are refused (the shipped ones are 2-9 kB).
@@ -66,6 +66,9 @@ MAX_WAYPOINTS = 10_000
 MAX_DRIVE_COMMANDS = 10_000
 #: The last drive command's time, at most (s): one day.
 MAX_DRIVE_TIME = 86_400.0
+#: Latitudes (deg) of an origin or a waypoint: UTM (the receiver's and the pose's grid)
+#: ends at 80 S and 84 N, and the margin keeps a whole terrain (at most 5 km) inside it.
+LATITUDE_RANGE = (-79.9, 83.9)
 #: Obstacle sizes (m): length, width and diameter; height and depth.
 MAX_OBSTACLE_SIZE = 1000.0
 MAX_OBSTACLE_HEIGHT = 100.0
@@ -592,9 +595,8 @@ def _check_raster_work(r: _Reader, items: tuple[Obstacle, ...],
 def _read_origin(r: _Reader, e: etree._Element) -> Origin:
     r.check_attributes(e, ("latitude", "longitude"), ("elevation",))
     r.no_children(e)
-    # UTM (the receiver's and the pose's grid) ends at 80 S and 84 N; the margin keeps
-    # the whole terrain (at most 5 km across) inside it
-    return Origin(latitude=r.number(e, "latitude", minimum=-79.9, maximum=83.9),
+    low, high = LATITUDE_RANGE
+    return Origin(latitude=r.number(e, "latitude", minimum=low, maximum=high),
                   longitude=r.number(e, "longitude", minimum=-180.0, maximum=180.0),
                   elevation=r.number(e, "elevation", 0.0, minimum=ELEVATION_RANGE[0],
                                      maximum=ELEVATION_RANGE[1]))
@@ -686,7 +688,8 @@ def _read_mission(r: _Reader, e: etree._Element | None, origin: Origin,
         r.no_children(child)
         keys = set(child.attrib)
         if keys == {"latitude", "longitude"}:
-            lat = r.number(child, "latitude", minimum=-79.9, maximum=83.9)
+            lat = r.number(child, "latitude", minimum=LATITUDE_RANGE[0],
+                           maximum=LATITUDE_RANGE[1])
             lon = r.number(child, "longitude", minimum=-180.0, maximum=180.0)
             if math.isnan(lat + lon + origin.latitude + origin.longitude + origin.elevation):
                 continue
