@@ -154,7 +154,8 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
             return True
         try:
             return reverse_clearance(self._map, float(self.arcs.curvatures[index]), distance,
-                                     radius=p.VehicleRadius, offsets=p.DiscOffsets,
+                                     radius=p.VehicleRadius + p.RecoverMargin,
+                                     offsets=p.DiscOffsets,
                                      map_offset=p.MapFrameOffset, apron=self._apron)
         except (ValueError, TypeError):  # a map without the layers it should hold
             return False

@@ -84,6 +84,13 @@ class ArcArbiterParameters(Parameters):
         (0.0, 0.8, 1.6, 2.4), unit="m",
         description="afa addition: where along the body (m ahead of the rear axle) the "
                     "back-out's discs ride (Obstacle Avoidance's DiscOffsets)")
+    RecoverMargin: Annotated[float, Field(ge=0, le=2)] = param(
+        0.3, unit="m",
+        description="afa addition: how much further than VehicleRadius the back-out's "
+                    "discs keep from hazard cells: the body's corners outside the discs "
+                    "(0.11 m on the Raptor) and the error of the map's placement of the "
+                    "vehicle (decimetres, the GPS's), which nothing behind the vehicle "
+                    "corrects")
     StartApron: Annotated[float, Field(ge=0, le=20)] = param(
         4.0, unit="m",
         description="afa addition: a back-out may cross unmapped ground this far behind "

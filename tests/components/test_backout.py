@@ -201,6 +201,26 @@ async def test_a_stale_vote_ends_a_back_out_at_once():
         assert stops_after(r.fake, 5.2 + stale)
 
 
+@pytest.mark.parametrize("margin", [0.3, 0.0])
+async def test_a_back_out_keeps_recover_margin_beyond_its_discs(margin):
+    # a wall whose cells start 2.5 m behind the rear axle; a back-out of 1.6 m (on any
+    # arc: straight back goes furthest) leaves the rear disc's centre 0.9 m short of
+    # it: room for the 0.7 m disc, but the Raptor's rear corners stand 0.11 m outside
+    # that disc and the map places the vehicle with the GPS's decimetres of error. With
+    # the default margin (0.3 m) the vehicle stands.
+    wall = [(-4.0, -2.6, -3.0, 3.0)]
+    async with rig(cruise=False, parameters=BACKOUT.model_copy(
+            update={"RecoverMargin": margin, "RecoverDistance": 1.6})) as r:
+        r.system.channel.publish("Raptor", "Traverse", trav(wall), origin="test")
+        veto_all_until(r, 2.0, 10.0)
+        await r.until(10.0)
+        if margin:
+            assert reverses(r) == []
+            assert r.arbiter.statistics()["backouts_blocked"] >= 1
+        else:
+            assert reverses(r), "the discs alone have room"
+
+
 @pytest.mark.parametrize("apron", [4.0, 0.0])
 async def test_a_vehicle_put_down_facing_a_wall_backs_out_over_its_start_apron(apron):
     # the first map: nothing seen behind the vehicle (it has not moved); every arc vetoed
