@@ -241,7 +241,7 @@ class Array:
             else:
                 raw = base64.b64decode(value["data"], validate=True)
             return np.frombuffer(raw, dtype=dtype).reshape(shape)
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
+        except (KeyError, TypeError, ValueError, IndexError, OverflowError) as exc:
             raise PydanticCustomError("ndarray", "bad array description: {err}",
                                       {"err": str(exc)}) from None
 

@@ -13,12 +13,65 @@ import socket
 import sys
 from typing import Any
 
+from pydantic import TypeAdapter, ValidationError
+from typing_extensions import TypedDict  # pydantic reads this one on Python < 3.12
+
 from afa.ports import interface_name
 
-__all__ = ["process_info", "memory", "INFO_VERSION"]
+__all__ = ["process_info", "memory", "info_problem", "INFO_VERSION"]
 
 #: Bumped when a field changes meaning; tools refuse newer versions.
 INFO_VERSION = 1
+
+
+class _ComponentRow(TypedDict):
+    name: str
+    type: str
+    state: str
+    healthy: bool
+    detail: str
+    restarts: int
+
+
+class _NameRow(TypedDict):
+    name: str
+    interface: str
+    owner: str
+    process: str
+    remote: bool
+
+
+class _InfoDocument(TypedDict):
+    """What the tools read of an info document by key (the rest they read with
+    defaults): checked before any tool uses a document a peer sent."""
+
+    robot: str
+    process: str
+    pid: int
+    host: str
+    components: list[_ComponentRow]
+    names: list[_NameRow]
+    event_types: dict[str, list[str]]
+    catalog: list[dict[str, Any]]
+
+
+_INFO = TypeAdapter(_InfoDocument)
+
+
+def info_problem(document: Any) -> str | None:
+    """Why ``document`` (a peer's answer on ``afa/<Robot>/info/*``, parsed JSON) is not an
+    info document of :data:`INFO_VERSION` the tools can read, or None when it is."""
+    if not isinstance(document, dict):
+        return f"not a JSON object but {type(document).__name__}"
+    if document.get("version") != INFO_VERSION:
+        return f"version {document.get('version')!r}, this program reads {INFO_VERSION}"
+    try:
+        _INFO.validate_python(document, strict=True)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        return f"{where}: {first['msg']}"
+    return None
 
 
 def memory() -> dict[str, int]:

@@ -20,10 +20,12 @@ from __future__ import annotations
 
 import asyncio
 import json
+import sys
 from collections.abc import AsyncIterator
 from typing import Any
 
 from afa.bridge import keys
+from afa.bridge.info import info_problem
 from afa.bridge.link import Inbox, load_zenoh, session_config
 from afa.bridge.parameters import DEFAULT_ENDPOINT, BridgeParameters
 from afa.bridge.remote import RemoteCall, caller_attachment, find_interface
@@ -60,6 +62,7 @@ class Attachment:
         self.session: Any = None
         self._subscribers: list[Any] = []
         self._infos: list[dict[str, Any]] | None = None
+        self._refused: set[str] = set()  # info documents refused, reported once each
 
     async def __aenter__(self) -> Attachment:
         config = session_config(self.parameters, listen=[])
@@ -98,13 +101,19 @@ class Attachment:
         loop = asyncio.get_running_loop()
         done: asyncio.Future[None] = loop.create_future()
         found: list[dict[str, Any]] = []
+        refused: list[str] = []
 
         def on_reply(reply: Any) -> None:  # Zenoh's thread
             if reply.ok is not None:
                 try:
-                    found.append(json.loads(reply.ok.payload.to_bytes()))
-                except ValueError:
-                    pass
+                    document = json.loads(reply.ok.payload.to_bytes())
+                except (ValueError, RecursionError):
+                    document = None
+                problem = info_problem(document) if document is not None else "not JSON"
+                if problem is None:
+                    found.append(document)
+                else:
+                    refused.append(f"{reply.ok.key_expr}: {problem}")
 
         def on_done() -> None:
             loop.call_soon_threadsafe(_resolve, done)
@@ -112,7 +121,11 @@ class Attachment:
         self.session.get(keys.infos(self.robot), self.zenoh.handlers.Callback(on_reply, on_done),
                          timeout=self.timeout if timeout is None else timeout)
         await done
-        infos = sorted(found, key=lambda info: (info.get("robot", ""), info.get("process", "")))
+        for line in refused:
+            if line not in self._refused:  # once per peer and reason
+                self._refused.add(line)
+                print(f"warning: ignored an info document from {line}", file=sys.stderr)
+        infos = sorted(found, key=lambda info: (info["robot"], info["process"]))
         self._infos = infos
         return infos
 

@@ -191,6 +191,31 @@ def test_an_array_dtype_with_objects_is_refused():
         wire.decode(bad)
 
 
+def _with_body(frame, edit):
+    """``frame`` rebuilt by the module docstring's layout with its JSON body's text
+    passed through ``edit`` (bytes to bytes), the buffers realigned."""
+    name, body, buffers = _read_frame(frame)
+    encoded = name.encode()
+    text = edit(json.dumps(body, separators=(",", ":")).encode())
+    out = (b"AFW1" + struct.pack("<H", len(encoded)) + encoded + struct.pack("<I", len(text))
+           + text + struct.pack(f"<H{len(buffers)}Q", len(buffers), *map(len, buffers)))
+    for buffer in buffers:
+        out += b"\x00" * (-len(out) % 8) + buffer
+    return out
+
+
+@pytest.mark.parametrize("old, new", [(b'"shape":[', b'"shape":[Infinity,'),
+                                      (b'"shape":[', b'"shape":[1e400,'),
+                                      (b'"$array":0', b'"$array":Infinity')])
+def test_an_infinite_array_shape_or_index_is_a_wire_error(old, new):
+    # JSON lets a peer write Infinity where a count belongs; int() of it overflows
+    frame = wire.encode(SAMPLES["Range3dLaserIDL"]())
+    assert wire.decode(_with_body(frame, lambda text: text)) == wire.decode(frame)
+    bad = _with_body(frame, lambda text: text.replace(old, new, 1))
+    with pytest.raises(wire.WireError, match="bad array description"):
+        wire.decode(bad)
+
+
 @settings(max_examples=300, deadline=None)
 @given(st.data())
 def test_damaged_frames_raise_wire_error_and_nothing_else(data):

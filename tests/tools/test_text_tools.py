@@ -20,7 +20,7 @@ import pytest
 
 from tests.bridge.conftest import ROOT, Peer, environment
 from tests.bridge.parts import endpoint, free_port
-from tests.tools.conftest import Tool
+from tests.tools.conftest import Ran, Tool
 
 pytest.importorskip("zenoh", reason="the tools need the extra afa[zenoh]")
 
@@ -182,6 +182,48 @@ def test_top_shows_the_launcher_table(running: str, tool: Tool) -> None:
     assert int(table["modelServer"][-5]) > 0 and int(table["modelServer"][-4]) > 0  # in, out
     assert table["modelServer"][-3].endswith("%")
     assert float(table["modelServer"][-2]) > 0 and table["modelServer"][-1] == "ms"
+
+
+@pytest.mark.parametrize("answer", [b"[1]", b'{"version":1,"robot":"Raptor","process":"rogue"}',
+                                    b'{"version":9}', b"not json"])
+def test_a_peer_answering_junk_for_its_info_is_ignored_with_a_warning(
+        running: str, tool: Tool, answer: bytes) -> None:
+    # any Zenoh peer can answer afa/Raptor/info/*: the tools read the real process and
+    # name the one they ignored, once, instead of failing on a missing key
+    import zenoh
+
+    from afa.bridge import keys
+    from afa.bridge.link import session_config
+    from afa.bridge.parameters import BridgeParameters
+
+    where = endpoint(free_port())
+    key = keys.info("Raptor", "rogue")
+    asked: list[str] = []
+
+    def reply(query: zenoh.Query) -> None:
+        asked.append(str(query.key_expr))
+        query.reply(key, answer)
+
+    def run(*args: str) -> Ran:
+        """The tool, again until it has asked the rogue (a fresh session may query
+        before the rogue's queryable has reached it)."""
+        for _ in range(10):
+            before = len(asked)
+            result = tool(*args, "--connect", running, "--connect", where)
+            if len(asked) > before:
+                return result
+        raise AssertionError(f"afa {args[0]} never asked the rogue peer")
+
+    with zenoh.open(session_config(BridgeParameters(), listen=[where])) as session:
+        rogue = session.declare_queryable(key, reply)
+        try:
+            names, top = run("names"), run("top", "--once")
+        finally:
+            rogue.undeclare()
+    assert "Raptor/ModelService" in names.stdout and "Raptor/vehicle  pid " in top.stdout
+    for result in (names, top):
+        assert "Traceback" not in result.stderr
+        assert result.stderr.count(f"ignored an info document from {key}") == 1
 
 
 def test_a_closed_pipe_ends_a_tool_quietly(running: str) -> None:
