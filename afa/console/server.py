@@ -20,6 +20,8 @@ nothing but this server. :mod:`afa.console.guard` says who may do what.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import logging
 from importlib import resources
@@ -48,6 +50,8 @@ _CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'
         "frame-ancestors 'none'")
 #: Largest message the page may send (subscriptions): small.
 _MAX_INCOMING = 64 * 1024
+#: Seconds a browser has, at stop, to take its close frame before its connection is cut.
+_CLOSE_TIMEOUT = 1.0
 
 
 def _static_files() -> dict[str, tuple[bytes, str]]:
@@ -88,7 +92,7 @@ class ConsoleServer:
             web.post("/api/replay/{action}", self._replay),
         ])
         self._runner: web.AppRunner | None = None
-        self._sockets: set[web.WebSocketResponse] = set()
+        self._sockets: dict[web.WebSocketResponse, web.Request] = {}
         self.port = guard.port
 
     async def start(self) -> None:
@@ -112,9 +116,9 @@ class ConsoleServer:
 
     async def stop(self) -> None:
         """Close every browser's WebSocket (the page shows 'disconnected' and retries),
-        then the server."""
-        for ws in list(self._sockets):
-            await ws.close(code=WSCloseCode.GOING_AWAY, message=b"the console is stopping")
+        then the server. A browser that does not read gets :data:`_CLOSE_TIMEOUT`
+        seconds, then its connection is cut: no client holds the shutdown."""
+        await asyncio.gather(*(_close(ws, request) for ws, request in self._sockets.items()))
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
@@ -166,7 +170,7 @@ class ConsoleServer:
 
         session = self.hub.open_session(send, name=str(request.remote))
         sender = self.hub.spawn(session.run(), owner="console sender")
-        self._sockets.add(ws)
+        self._sockets[ws] = request
         try:
             await ws.send_bytes(encode_frame(self._hello()))
             async for message in ws:
@@ -175,7 +179,7 @@ class ConsoleServer:
                 elif message.type is WSMsgType.ERROR:
                     break
         finally:
-            self._sockets.discard(ws)
+            self._sockets.pop(ws, None)
             self.hub.close_session(session)
             sender.cancel()
         return ws
@@ -260,6 +264,16 @@ class ConsoleServer:
         except AfaError as exc:
             return _error(409, str(exc))
         return web.json_response({"ok": True, "action": action, "replay": status})
+
+
+async def _close(ws: web.WebSocketResponse, request: web.Request) -> None:
+    """Close ``ws`` within :data:`_CLOSE_TIMEOUT`, then drop whatever its peer left unread
+    (a close frame stuck behind unread data would otherwise keep the socket forever)."""
+    with contextlib.suppress(asyncio.TimeoutError):
+        await asyncio.wait_for(ws.close(code=WSCloseCode.GOING_AWAY,
+                                        message=b"the console is stopping"), _CLOSE_TIMEOUT)
+    if request.transport is not None:
+        request.transport.abort()
 
 
 def _dumps(value: Any) -> str:

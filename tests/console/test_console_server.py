@@ -2,12 +2,14 @@
 and the command line. Real sockets, a real aiohttp client; the system runs on the wall
 clock (a second or two per test)."""
 
+import asyncio
 import importlib.util
 import json
 import socket
 from pathlib import Path
 
 import aiohttp
+import numpy as np
 import pytest
 from console_synthetic import synthetic_system
 
@@ -16,6 +18,8 @@ from afa.cli import main
 from afa.console import Console, ConsoleError, ConsoleOptions
 from afa.console.frames import decode_frame
 from afa.console.guard import TOKEN_HEADER
+from afa.testing import until
+from idl import Position3DIDL, TimeIDL, TravMapArrayEventIDL
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -164,6 +168,54 @@ async def test_the_websocket_says_hello_then_sends_what_was_asked_for():
             await ws.close()
     finally:
         await finish(system, console)
+
+
+def text_frame(text):
+    """A client's WebSocket text frame (masked with a zero key: the payload as is)."""
+    payload = text.encode()
+    assert len(payload) < 126
+    return bytes([0x81, 0x80 | len(payload)]) + bytes(4) + payload
+
+
+def huge_map(system, cells=1500):
+    """A traversability map far larger than the socket buffers (two 9 MB layers)."""
+    layer = np.zeros((cells, cells), dtype=np.float32)
+    return TravMapArrayEventIDL(
+        time=TimeIDL.from_seconds(system.clock.now()), frame="World", mapPose=np.eye(4),
+        initialUTM=np.zeros(3), gridsize=0.5, originX=0.0, originY=0.0, rows=cells,
+        cols=cells, hazard=layer, goodness=layer, vehiclePosition=Position3DIDL(x=0, y=0))
+
+
+@pytest.mark.timeout(60)
+async def test_stop_does_not_wait_for_a_browser_that_stops_reading():
+    """A client that subscribes to maps and never reads again: the server's sends and its
+    close frame cannot leave, yet stop() completes (the connection is dropped)."""
+    system, console = await running()
+    loop = asyncio.get_running_loop()
+    client = socket.socket()
+    client.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    client.setblocking(False)
+    try:
+        await loop.sock_connect(client, ("127.0.0.1", console.port))
+        await loop.sock_sendall(client, (
+            f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{console.port}\r\nUpgrade: websocket\r\n"
+            "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+            "Sec-WebSocket-Version: 13\r\n\r\n").encode())
+        assert (await loop.sock_recv(client, 4096)).startswith(b"HTTP/1.1 101")
+        # once per 100 s: the synthetic Traverse maps cannot fill the buffers before it
+        await loop.sock_sendall(client, text_frame(json.dumps(
+            {"op": "subscribe", "kinds": {"map.traverse": 0.01}})))
+        system.channel.publish(system.robot, "Huge", huge_map(system))
+
+        def huge_map_sent():
+            return any(s.statistics()["streams"].get("map.traverse/Huge", {}).get("sent")
+                       for s in console.hub.sessions)
+
+        await until(huge_map_sent, WallClock(), timeout=30, what="the map handed to the socket")
+        await finish(system, console)  # never read: returns all the same
+        assert console.hub.sessions == set()
+    finally:
+        client.close()
 
 
 async def test_a_busy_port_and_a_missing_extra_are_clear_errors(monkeypatch):
