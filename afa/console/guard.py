@@ -102,7 +102,9 @@ class ControlGuard:
             return ("control is off: start the console with --console-control to start, "
                     "stop or restart components and to command the vehicle ('stop vehicle' "
                     "always works)")
-        if token is None or not secrets.compare_digest(token, self.token):
+        # as bytes: a header may hold any character (compare_digest refuses non-ASCII str)
+        if token is None or not secrets.compare_digest(
+                token.encode("utf-8", "surrogateescape"), self.token.encode()):
             return ("missing or wrong control token: open the URL the console printed "
                     "(it ends in #token=...)")
         return None

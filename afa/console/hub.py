@@ -254,6 +254,8 @@ class ConsoleHub:
         self.sessions: set[Session] = set()
         self.events_out: dict[str, int] = {}
         self.observed = 0
+        #: what browsers sent that the console ignored or refused, by kind
+        self.rejected: Counter[str] = Counter()
         self.halts: Counter[str] = Counter()
         self.last_halt: dict[str, float] = {}
         self.votes: dict[str, dict[str, Any]] = {}
@@ -575,6 +577,7 @@ class ConsoleHub:
             "stale_vote_time": stale_after,
             "actions": self.actions[-20:],
             "console": {"observer": self.observer.statistics(), "observed": self.observed,
+                        "rejected": dict(self.rejected),
                         "sessions": [s.statistics() for s in self.sessions]},
             "vehicle_control": self.served_name(VehicleControl),
             "vehicle_control_component": self.serving_component(VehicleControl),

@@ -114,7 +114,7 @@ async def perform(control: ReplayControl, action: str, value: Any = None) -> Non
     elif action in ("seek", "speed"):
         try:
             number = float(value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ValueError(f"{action} needs a number, got {value!r}") from None
         if not math.isfinite(number) or (action == "speed" and number <= 0) or number < 0:
             kind = "positive" if action == "speed" else "non-negative"

@@ -197,13 +197,16 @@ class ConsoleServer:
     def _on_message(self, session: Any, data: str) -> None:
         try:
             message = json.loads(data)
-        except ValueError:
-            log.info("console: ignored a message that is not JSON")
-            return
+        except (ValueError, RecursionError):  # not JSON, or nested too deeply to read
+            message = None
+        kinds = None
         if isinstance(message, dict) and message.get("op") == "subscribe":
             kinds = message.get("kinds")
-            if isinstance(kinds, dict):
-                session.subscribe(kinds)
+        if isinstance(kinds, dict):
+            session.subscribe(kinds)
+        else:
+            self.hub.rejected["message"] += 1
+            log.info("console: ignored a message that is not a subscription")
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.hub.status(), dumps=_dumps)
@@ -254,8 +257,8 @@ class ConsoleServer:
             return refused
         try:
             body = await request.json() if request.can_read_body else {}
-        except ValueError:
-            return _error(400, "the body is not JSON")
+        except (ValueError, RecursionError):
+            return _error(400, "the body is not JSON (or nests too deeply)")
         value = body.get("value") if isinstance(body, dict) else None
         try:
             status = await self.hub.replay_action(action, value)

@@ -20,6 +20,7 @@ browser and a socket, which live in real time.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -151,6 +152,8 @@ def clamp_rate(kind: str, rate: Any) -> float:
     policy = POLICIES[kind]
     try:
         value = float(rate)
+    except OverflowError:  # an integer beyond any float, of either sign
+        value = math.inf if rate > 0 else 0.0
     except (TypeError, ValueError):
         return policy.rate
     if not value > 0.0 or value != value:  # also NaN

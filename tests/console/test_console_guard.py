@@ -58,5 +58,8 @@ def test_control_needs_the_option_and_the_token_and_stop_needs_neither():
     control = ControlGuard("127.0.0.1", 8765, control=True)
     assert "token" in control.check_permission("control", None)
     assert "token" in control.check_permission("control", "guess")
+    # any character a header may carry is just a wrong token
+    for foreign in ("é", "\udcff", control.token + "é"):
+        assert "token" in control.check_permission("control", foreign)
     assert control.check_permission("control", control.token) is None
     assert ControlGuard("127.0.0.1", 1).token != control.token  # per run

@@ -124,8 +124,9 @@ async def test_with_the_control_option_commands_need_the_token():
         async with aiohttp.ClientSession() as http:
             url = base(console) + "/api/components/synthetic/restart"
             assert (await call(http, "POST", url, json={}))[0] == 403
-            assert (await call(http, "POST", url, json={},
-                               headers={TOKEN_HEADER: "guess"}))[0] == 403
+            for wrong in ("guess", "é"):
+                assert (await call(http, "POST", url, json={},
+                                   headers={TOKEN_HEADER: wrong}))[0] == 403
             before = system.components["synthetic"]._scope
             done = await http.post(url, json={}, headers={TOKEN_HEADER: console.guard.token})
             assert done.status == 200 and (await done.json())["state"] == "running"
@@ -165,6 +166,30 @@ async def test_the_websocket_says_hello_then_sends_what_was_asked_for():
             status = await (await http.get(base(console) + "/api/status")).json()
             assert [row["name"] for row in status["components"]] == [
                 "modelServer", "synthetic", "RaptorService"]
+            await ws.close()
+    finally:
+        await finish(system, console)
+
+
+async def test_input_the_server_cannot_use_is_refused_or_ignored_and_counted():
+    """Deeply nested JSON (too deep for Python's parser) and numbers beyond any float:
+    a 400 for a request, an ignored (and counted) WebSocket message; the socket stays."""
+    system, console = await running()
+    try:
+        async with aiohttp.ClientSession() as http:
+            status, body = await call(http, "POST", base(console) + "/api/replay/seek",
+                                      data="[" * 20000 + "]" * 20000,
+                                      headers={"Content-Type": "application/json"})
+            assert status == 400 and "not JSON" in body["error"]
+            ws = await http.ws_connect(base(console) + "/ws", headers={"Origin": base(console)})
+            assert decode_frame(await ws.receive_bytes(timeout=5))[0]["kind"] == "hello"
+            await ws.send_str("[" * 30000)
+            await ws.send_str('{"op": "subscribe", "kinds": ["status"]}')
+            await ws.send_str('{"op": "subscribe", "kinds": {"status": 1%s}}' % ("0" * 400))
+            header, _ = decode_frame(await ws.receive_bytes(timeout=5))
+            assert header["kind"] == "status"  # the huge rate is the kind's maximum
+            status = await (await http.get(base(console) + "/api/status")).json()
+            assert status["console"]["rejected"] == {"message": 2}
             await ws.close()
     finally:
         await finish(system, console)

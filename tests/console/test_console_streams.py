@@ -64,8 +64,9 @@ def test_a_requested_rate_is_clamped_to_the_kinds_maximum_and_nonsense_means_def
     policy = POLICIES["map.traverse"]
     assert clamp_rate("map.traverse", 1000) == policy.max_rate
     assert clamp_rate("map.traverse", 0.5) == 0.5
-    for nonsense in (None, "fast", -1, 0, math.nan):
+    for nonsense in (None, "fast", -1, 0, math.nan, -10**400, [[1]]):
         assert clamp_rate("map.traverse", nonsense) == policy.rate
+    assert clamp_rate("map.traverse", 10**400) == policy.max_rate  # beyond any float
     with pytest.raises(KeyError):
         clamp_rate("no.such.kind", 1)
 
