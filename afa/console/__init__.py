@@ -10,7 +10,8 @@ page served by the running system (``docs/console.md``, decision 0013).
             await system.run()
 
 From the command line: ``python -m afa run CONFIG --sim --console 8765`` (loopback),
-``--console 0.0.0.0:8765`` (every interface), ``--console-control`` to allow the start,
+``--console 0.0.0.0:8765`` (every interface; the page is then opened by IP address, or by
+a name given with ``--console-host-name NAME``), ``--console-control`` to allow the start,
 stop and restart buttons and vehicle commands ("stop vehicle" always works).
 
 The server needs the optional extra ``console`` (aiohttp): ``pip install 'afa[console]'``.
@@ -25,7 +26,7 @@ import importlib.util
 from dataclasses import dataclass, field
 from typing import Any
 
-from afa.console.guard import ControlGuard, is_loopback, parse_address
+from afa.console.guard import ControlGuard, host_name, is_loopback, parse_address
 from afa.console.hub import ConsoleHub, GroundTruth, HubOptions, Session
 from afa.console.launcher import CONSOLE_TASK
 from afa.console.replay import ReplayControl, replay_control
@@ -49,13 +50,16 @@ class ConsoleOptions:
     """Where the console listens and what it allows (see :mod:`afa.console.guard`).
 
     ``port`` 0 picks a free port. ``control`` allows starting, stopping and restarting
-    components and commanding the vehicle from the page. ``reference_frame`` is the
-    frame of the 3-D view. ``rates`` overrides default stream rates per kind.
+    components and commanding the vehicle from the page. ``host_names`` are names the
+    page may be opened by (``vehicle.lan``) besides the loopback names, or, beyond
+    loopback, IP addresses. ``reference_frame`` is the frame of the 3-D view. ``rates``
+    overrides default stream rates per kind.
     """
 
     host: str = "127.0.0.1"
     port: int = DEFAULT_PORT
     control: bool = False
+    host_names: list[str] = field(default_factory=list)
     reference_frame: str = "Raptor:RearAxleCenter"
     status_period: float = 1.0
     rates: dict[str, float] = field(default_factory=dict)
@@ -86,7 +90,8 @@ class Console:
             reference_frame=self.options.reference_frame,
             status_period=self.options.status_period, rates=dict(self.options.rates)),
             truth=truth, replay=None if replay is None else replay_control(replay))
-        self.guard = ControlGuard(self.options.host, self.options.port, self.options.control)
+        self.guard = ControlGuard(self.options.host, self.options.port, self.options.control,
+                                  frozenset(map(host_name, self.options.host_names)))
         self._server: Any = None
 
     @property
@@ -149,9 +154,16 @@ def _address(text: str) -> tuple[str, int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _host_name(text: str) -> str:
+    try:
+        return host_name(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--console [HOST:]PORT`` and ``--console-control`` to a command (``afa run``,
-    ``afa replay``)."""
+    """Add ``--console [HOST:]PORT``, ``--console-control`` and ``--console-host-name`` to
+    a command (``afa run``, ``afa replay``)."""
     parser.add_argument(
         "--console", type=_address, metavar="[HOST:]PORT",
         help="serve the browser console on PORT (127.0.0.1 unless HOST is given; port 0 "
@@ -160,6 +172,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--console-control", action="store_true",
         help="let the console start, stop and restart components and command the vehicle "
              "('stop vehicle' always works); the printed URL carries the control token")
+    parser.add_argument(
+        "--console-host-name", type=_host_name, action="append", default=[], metavar="NAME",
+        help="a name the console's page may be opened by (e.g. vehicle.lan; repeat for "
+             "more); beyond loopback only IP addresses are accepted otherwise")
 
 
 def from_args(args: argparse.Namespace, system: Any, *, truth: GroundTruth | None = None,
@@ -173,7 +189,8 @@ def from_args(args: argparse.Namespace, system: Any, *, truth: GroundTruth | Non
         return None
     host, port = address
     return Console(system, ConsoleOptions(host=host, port=port,
-                                          control=bool(args.console_control)),
+                                          control=bool(args.console_control),
+                                          host_names=list(args.console_host_name)),
                    truth=truth, replay=replay)
 
 

@@ -3,8 +3,10 @@
 Three rules, checked on every request (decision 0013):
 
 1. **Host**: on a loopback address the ``Host`` header must name the server itself
-   (``127.0.0.1:PORT``, ``localhost:PORT``, ``[::1]:PORT``), so a web page that rebinds its
-   own domain name to 127.0.0.1 (DNS rebinding) gets nothing.
+   (``127.0.0.1:PORT``, ``localhost:PORT``, ``[::1]:PORT``); beyond loopback it must be an
+   IP address (``192.168.1.5:PORT``, ``[fd00::5]:PORT``). Either way a name the user
+   listed (``--console-host-name``) is accepted too. So a web page that rebinds its own
+   domain name to the console's address (DNS rebinding) gets nothing.
 2. **Origin**: a request that carries an ``Origin`` (every browser ``fetch`` POST and every
    WebSocket does) must come from the console's own page, so another site open in the same
    browser cannot read the vehicle's data or press its buttons (cross-site request
@@ -21,14 +23,17 @@ Three rules, checked on every request (decision 0013):
 from __future__ import annotations
 
 import ipaddress
+import re
 import secrets
 from dataclasses import dataclass, field
 from typing import Literal
 
-__all__ = ["ControlGuard", "parse_address", "is_loopback", "TOKEN_HEADER"]
+__all__ = ["ControlGuard", "parse_address", "is_loopback", "host_name", "TOKEN_HEADER"]
 
 #: The header the page sends its control token in.
 TOKEN_HEADER = "X-Afa-Control-Token"
+#: A ``Host`` header: a name or an IP address (IPv6 in brackets), perhaps a port.
+_HOST = re.compile(r"(?P<host>\[[0-9a-f:.]+\]|[a-z0-9_.-]+)(?::[0-9]{1,5})?")
 
 Permission = Literal["view", "stop", "replay", "control"]
 
@@ -54,6 +59,15 @@ def parse_address(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]
     return host or default_host, port
 
 
+def host_name(text: str) -> str:
+    """A name the console may be reached by (``vehicle.lan``), lower case. Raises
+    ValueError for anything else (a port, a path)."""
+    name = text.strip().lower()
+    if not re.fullmatch(r"[a-z0-9_.-]+", name):
+        raise ValueError(f"{text!r} is not a host name (e.g. vehicle.lan, without a port)")
+    return name
+
+
 def is_loopback(host: str) -> bool:
     if host == "localhost":
         return True
@@ -70,23 +84,36 @@ class ControlGuard:
     host: str
     port: int
     control: bool = False
+    #: further names the console may be reached by (lower case; any port)
+    names: frozenset[str] = frozenset()
     token: str = field(default_factory=lambda: secrets.token_urlsafe(18))
 
-    def hosts(self) -> set[str] | None:
-        """``Host`` header values accepted (None: any, when listening beyond loopback)."""
-        if not is_loopback(self.host):
-            return None
-        port = self.port
-        return {f"127.0.0.1:{port}", f"localhost:{port}", f"[::1]:{port}",
-                f"{self.host}:{port}"}
+    def accepts_host(self, host_header: str) -> bool:
+        """Does ``host_header`` name this console (rule 1)?"""
+        found = _HOST.fullmatch(host_header.lower())
+        if found is None:
+            return False
+        host = found["host"]
+        if host in self.names:
+            return True
+        if is_loopback(self.host):
+            port = self.port
+            return host_header.lower() in {f"127.0.0.1:{port}", f"localhost:{port}",
+                                           f"[::1]:{port}", f"{self.host}:{port}"}
+        try:
+            ipaddress.ip_address(host.strip("[]"))  # an IP address: no name to rebind
+        except ValueError:
+            return False
+        return True
 
     def check_request(self, host_header: str | None, origin: str | None) -> str | None:
         """Why a request must be refused (Host and Origin rules), or None."""
-        allowed = self.hosts()
         if host_header is None:
             return "no Host header"
-        if allowed is not None and host_header.lower() not in allowed:
-            return f"Host {host_header!r} is not this console"
+        if not self.accepts_host(host_header):
+            hint = "" if is_loopback(self.host) else (
+                ": use its IP address, or give the name with --console-host-name")
+            return f"Host {host_header!r} is not this console{hint}"
         if origin is not None and origin != "null" and origin.lower() != (
                 f"http://{host_header}".lower()):
             return f"requests from {origin!r} are not accepted (only from the console's page)"

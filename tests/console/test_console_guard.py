@@ -2,7 +2,7 @@
 
 import pytest
 
-from afa.console.guard import ControlGuard, is_loopback, parse_address
+from afa.console.guard import ControlGuard, host_name, is_loopback, parse_address
 
 
 @pytest.mark.parametrize("text, expected", [
@@ -35,6 +35,8 @@ def test_loopback_hosts():
 def test_on_loopback_only_this_servers_host_and_own_page_are_accepted():
     guard = ControlGuard("127.0.0.1", 8765)
     assert guard.check_request("127.0.0.1:8765", None) is None
+    assert "not this console" in guard.check_request("192.168.1.5:8765", None)
+    assert "not this console" in guard.check_request("127.0.0.1:9000", None)
     assert guard.check_request("localhost:8765", "http://localhost:8765") is None
     # DNS rebinding: a foreign name that resolves to 127.0.0.1
     assert "not this console" in guard.check_request("evil.example:8765", None)
@@ -44,10 +46,31 @@ def test_on_loopback_only_this_servers_host_and_own_page_are_accepted():
     assert guard.check_request(None, None) == "no Host header"
 
 
-def test_beyond_loopback_any_host_but_only_the_own_origin():
+def test_beyond_loopback_ip_addresses_and_listed_names_but_only_the_own_origin():
     guard = ControlGuard("0.0.0.0", 8765)
-    assert guard.check_request("vehicle.lan:8765", "http://vehicle.lan:8765") is None
-    assert guard.check_request("vehicle.lan:8765", "http://other.lan:8765") is not None
+    for host in ("192.168.1.5:8765", "10.0.0.7", "127.0.0.1:8765", "[fd00::5]:8765",
+                 "[::1]:9000"):  # any port: a forwarded one too
+        assert guard.check_request(host, f"http://{host}") is None, host
+    # DNS rebinding: the attacker's name, resolving to this machine, and its own page
+    assert "not this console" in guard.check_request("attacker.example:8765",
+                                                     "http://attacker.example:8765")
+    assert "--console-host-name" in guard.check_request("vehicle.lan:8765", None)
+    for odd in ("1.2.3.4@evil.example", "[evil.example]:8765", "1.2.3.4:8765/x", ""):
+        assert guard.check_request(odd, None) is not None, odd
+    named = ControlGuard("0.0.0.0", 8765, names=frozenset({"vehicle.lan"}))
+    assert named.check_request("Vehicle.LAN:8765", "http://vehicle.lan:8765") is None
+    assert named.check_request("vehicle.lan:8765", "http://other.lan:8765") is not None
+    assert named.check_request("other.lan:8765", None) is not None
+    # a listed name on loopback too (a proxy in front of the console)
+    assert ControlGuard("127.0.0.1", 8765, names=frozenset({"vehicle.lan"})).check_request(
+        "vehicle.lan", None) is None
+
+
+def test_host_names_are_names_without_a_port():
+    assert host_name(" Vehicle.LAN ") == "vehicle.lan"
+    for bad in ("vehicle.lan:8765", "http://vehicle.lan", "a b", ""):
+        with pytest.raises(ValueError, match="not a host name"):
+            host_name(bad)
 
 
 def test_control_needs_the_option_and_the_token_and_stop_needs_neither():

@@ -2,6 +2,7 @@
 and the command line. Real sockets, a real aiohttp client; the system runs on the wall
 clock (a second or two per test)."""
 
+import argparse
 import asyncio
 import importlib.util
 import json
@@ -15,7 +16,7 @@ from console_synthetic import synthetic_system
 
 from afa import WallClock
 from afa.cli import main
-from afa.console import Console, ConsoleError, ConsoleOptions
+from afa.console import Console, ConsoleError, ConsoleOptions, add_arguments, from_args
 from afa.console.frames import decode_frame
 from afa.console.guard import TOKEN_HEADER
 from afa.testing import until
@@ -93,6 +94,50 @@ async def test_other_host_names_and_other_sites_are_refused():
             assert status == 415
     finally:
         await finish(system, console)
+
+
+async def test_beyond_loopback_a_rebinding_name_is_refused_and_ip_addresses_are_not():
+    """DNS rebinding against a console on every interface: the attacker's page, under its
+    own name resolved to this machine, reads nothing and commands nothing."""
+    system, console = await running(control=True, host="0.0.0.0", host_names=["vehicle.lan"])
+    try:
+        port = console.port
+        async with aiohttp.ClientSession() as http:
+            url = f"http://127.0.0.1:{port}"
+            attacker = {"Host": f"attacker.example:{port}",
+                        "Origin": f"http://attacker.example:{port}"}
+            assert (await call(http, "GET", url + "/api/status", headers=attacker))[0] == 403
+            status, body = await call(http, "POST", url + "/api/vehicle/stop", json={},
+                                      headers=attacker)
+            assert status == 403 and "not this console" in body["error"]
+            with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                await http.ws_connect(url + "/ws", headers=attacker)
+            assert refused.value.status == 403
+            assert system.components["RaptorService"].calls == []
+            for host in (f"127.0.0.1:{port}", f"vehicle.lan:{port}"):
+                own = {"Host": host, "Origin": f"http://{host}"}
+                assert (await call(http, "GET", url + "/api/status", headers=own))[0] == 200
+                status, _ = await call(http, "POST", url + "/api/vehicle/stop", json={},
+                                       headers=own)
+                assert status == 200
+        assert system.components["RaptorService"].calls == ["stopVehicle"] * 2
+    finally:
+        await finish(system, console)
+
+
+def test_the_command_line_lists_the_consoles_host_names(capsys):
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--console", "0.0.0.0:8765", "--console-host-name",
+                              "Vehicle.lan", "--console-host-name", "ops"])
+    console = from_args(args, synthetic_system(WallClock()))
+    assert console.options.host_names == ["vehicle.lan", "ops"]
+    assert console.guard.check_request("vehicle.lan:8765", None) is None
+    assert console.guard.check_request("ops:8765", None) is None
+    assert console.guard.check_request("attacker.example:8765", None) is not None
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--console", "0", "--console-host-name", "vehicle.lan:8765"])
+    assert "not a host name" in capsys.readouterr().err
 
 
 async def test_without_the_control_option_commands_are_refused_but_stop_vehicle_works():
