@@ -254,7 +254,7 @@ class ConsoleHub:
         self.sessions: set[Session] = set()
         self.events_out: dict[str, int] = {}
         self.observed = 0
-        #: what browsers sent that the console ignored or refused, by kind
+        #: requests and messages the console refused, ignored or failed on, by kind
         self.rejected: Counter[str] = Counter()
         self.halts: Counter[str] = Counter()
         self.last_halt: dict[str, float] = {}

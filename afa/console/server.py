@@ -24,10 +24,12 @@ import asyncio
 import contextlib
 import json
 import logging
+from collections.abc import Callable
 from importlib import resources
 from typing import Any
 
 from aiohttp import WSCloseCode, WSMsgType, web
+from aiohttp.http_exceptions import HttpProcessingError
 
 from afa.console.frames import encode_frame, finite
 from afa.console.guard import TOKEN_HEADER, ControlGuard, Permission
@@ -52,6 +54,8 @@ _CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'
 _MAX_INCOMING = 64 * 1024
 #: Seconds a browser has, at stop, to take its close frame before its connection is cut.
 _CLOSE_TIMEOUT = 1.0
+#: Log lines per kind of refused, ignored or failed request; further ones are only counted.
+_LOG_LIMIT = 5
 
 
 def _static_files() -> dict[str, tuple[bytes, str]]:
@@ -100,7 +104,7 @@ class ConsoleServer:
         Raises OSError when the address cannot be used."""
         # the browsers' WebSockets are closed first at stop(); nothing else lingers
         runner = web.AppRunner(self.app, access_log=None, handle_signals=False,
-                               shutdown_timeout=2.0)
+                               shutdown_timeout=2.0, logger=_RequestErrors(self._note))
         await runner.setup()
         site = web.TCPSite(runner, self.guard.host, self.guard.port, reuse_address=True)
         try:
@@ -123,13 +127,25 @@ class ConsoleServer:
             await self._runner.cleanup()
             self._runner = None
 
+    def _note(self, kind: str, level: int, message: str, *args: Any,
+              exc_info: Any = None) -> None:
+        """Count a refused, ignored or failed request or message (``console.rejected`` in
+        the status); log only the first :data:`_LOG_LIMIT` of each kind."""
+        self.hub.rejected[kind] += 1
+        count = self.hub.rejected[kind]
+        if count <= _LOG_LIMIT:
+            if count == _LOG_LIMIT:
+                message += " (further ones are only counted)"
+            log.log(level, message, *args, exc_info=exc_info)
+
     # -- middleware ------------------------------------------------------------------------
     @web.middleware
     async def _headers(self, request: web.Request, handler: Any) -> web.StreamResponse:
         refusal = self.guard.check_request(request.headers.get("Host"),
                                            request.headers.get("Origin"))
         if refusal is not None:
-            log.warning("console: refused %s %s: %s", request.method, request.path, refusal)
+            self._note("request", logging.WARNING, "console: refused %s %s: %s",
+                       request.method, request.path, refusal)
             return _error(403, refusal)
         if request.method == "POST" and request.content_type != "application/json":
             return _error(415, "send control requests as application/json")
@@ -205,8 +221,8 @@ class ConsoleServer:
         if isinstance(kinds, dict):
             session.subscribe(kinds)
         else:
-            self.hub.rejected["message"] += 1
-            log.info("console: ignored a message that is not a subscription")
+            self._note("message", logging.INFO,
+                       "console: ignored a message that is not a subscription")
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.hub.status(), dumps=_dumps)
@@ -216,7 +232,8 @@ class ConsoleServer:
         refusal = self.guard.check_permission(permission, request.headers.get(TOKEN_HEADER))
         if refusal is None:
             return None
-        log.warning("console: refused %s: %s", request.path, refusal)
+        self._note("command", logging.WARNING, "console: refused %s: %s", request.path,
+                   refusal)
         return _error(403, refusal)
 
     async def _component(self, request: web.Request) -> web.Response:
@@ -267,6 +284,26 @@ class ConsoleServer:
         except AfaError as exc:
             return _error(409, str(exc))
         return web.json_response({"ok": True, "action": action, "replay": status})
+
+
+class _RequestErrors(logging.LoggerAdapter[logging.Logger]):
+    """aiohttp's log of the requests it could not handle, through ``note``: a malformed
+    request (the client's fault, answered 400) in one line without a traceback, an error
+    of ours with it; both counted, the first few of each kind logged."""
+
+    def __init__(self, note: Callable[..., None]) -> None:
+        super().__init__(logging.getLogger("aiohttp.server"))
+        self.note = note
+
+    def log(self, level: int, msg: Any, *args: Any, exc_info: Any = None,
+            **kwargs: Any) -> None:
+        if level < logging.WARNING:
+            super().log(level, msg, *args, exc_info=exc_info, **kwargs)
+        elif isinstance(exc_info, HttpProcessingError):
+            self.note("malformed", logging.WARNING, "console: malformed request (%d): %.200s",
+                      exc_info.code, exc_info.message)
+        else:
+            self.note("error", logging.ERROR, f"console: {msg}", *args, exc_info=exc_info)
 
 
 async def _close(ws: web.WebSocketResponse, request: web.Request) -> None:

@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import importlib.util
 import json
+import logging
 import socket
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from afa.cli import main
 from afa.console import Console, ConsoleError, ConsoleOptions, add_arguments, from_args
 from afa.console.frames import decode_frame
 from afa.console.guard import TOKEN_HEADER
+from afa.console.server import _LOG_LIMIT
 from afa.testing import until
 from idl import Position3DIDL, TimeIDL, TravMapArrayEventIDL
 
@@ -236,6 +238,44 @@ async def test_input_the_server_cannot_use_is_refused_or_ignored_and_counted():
             status = await (await http.get(base(console) + "/api/status")).json()
             assert status["console"]["rejected"] == {"message": 2}
             await ws.close()
+    finally:
+        await finish(system, console)
+
+
+async def raw_request(port, request):
+    """The server's whole answer to ``request`` (bytes), sent as is."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    try:
+        writer.write(request)
+        return await reader.read()
+    finally:
+        writer.close()
+        await writer.wait_closed()
+
+
+async def test_refused_and_malformed_requests_are_logged_a_few_times_then_counted(caplog):
+    system, console = await running()
+    times = _LOG_LIMIT + 3
+    try:
+        with caplog.at_level(logging.WARNING):
+            for _ in range(times):
+                malformed = await raw_request(console.port, (
+                    b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nHost: evil.example\r\n\r\n"))
+                assert malformed.split(b"\r\n")[0].endswith(b"400 Bad Request")
+                refused = await raw_request(console.port, (
+                    b"GET /api/status HTTP/1.1\r\nHost: evil.example\r\n"
+                    b"Connection: close\r\n\r\n"))
+                assert refused.startswith(b"HTTP/1.1 403")
+        async with aiohttp.ClientSession() as http:
+            status = await (await http.get(base(console) + "/api/status")).json()
+        assert status["console"]["rejected"] == {"malformed": times, "request": times}
+        lines = [record.getMessage() for record in caplog.records]
+        malformed_lines = [line for line in lines if "malformed request" in line]
+        refused_lines = [line for line in lines if "refused GET /api/status" in line]
+        assert len(malformed_lines) == len(refused_lines) == _LOG_LIMIT
+        assert "Duplicate 'Host' header" in malformed_lines[0]
+        assert "only counted" in malformed_lines[-1] and "only counted" in refused_lines[-1]
+        assert [record for record in caplog.records if record.exc_info] == []  # no traceback
     finally:
         await finish(system, console)
 
