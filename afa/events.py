@@ -27,6 +27,7 @@ number and one IDL body. Suppliers publish anonymously; every subscription whose
 from __future__ import annotations
 
 import asyncio
+import math
 import struct
 from collections import Counter, deque
 from collections.abc import AsyncIterator
@@ -77,42 +78,42 @@ class Event(NamedTuple):
     @classmethod
     def decode(cls, data: bytes | bytearray | memoryview) -> Event:
         """Inverse of :meth:`encode`. Raises :class:`idl.wire.WireError` for anything
-        that is not a valid event of a known IDL type."""
+        that is not a valid event of a known IDL type (a time stamp that is not finite
+        included)."""
         view = memoryview(data)
-        try:
-            magic, time, seq, n_domain, n_type, n_origin = _ENVELOPE.unpack_from(view)
-        except struct.error:
-            raise wire.WireError("truncated event envelope") from None
-        if magic != _EVENT_MAGIC:
-            raise wire.WireError(f"not an afa event (magic {magic!r})")
-        offset = _ENVELOPE.size
-        try:
-            names: list[str] = []
-            for n in (n_domain, n_type, n_origin):
-                names.append(bytes(view[offset:offset + n]).decode())
-                offset += n
-        except UnicodeDecodeError as exc:
-            raise wire.WireError(f"event names are not UTF-8: {exc}") from None
+        domain, event_type, time, seq, origin, offset = _envelope(view)
         body: IDLModel = wire.decode(view[offset:])  # arrays: views of ``data`` (bytes)
-        return cls(names[0], names[1], time, seq, body, names[2])
+        return cls(domain, event_type, time, seq, body, origin)
 
 
 def peek_envelope(data: bytes | bytearray | memoryview) -> tuple[str, str, float, int, str]:
     """``(domain, type, time, seq, origin)`` of an :meth:`Event.encode` frame, without
     decoding the body (a log player schedules and filters by these). Raises
     :class:`idl.wire.WireError` for a frame that is not an event."""
+    return _envelope(memoryview(data))[:5]
+
+
+def _envelope(view: memoryview) -> tuple[str, str, float, int, str, int]:
+    """``(domain, type, time, seq, origin, offset of the body)`` of an event frame: the
+    one check of an envelope from a peer, a log or a console, whoever reads it. A time
+    stamp that is not finite is refused: every event made here has a clock's time."""
     try:
-        magic, time, seq, n_domain, n_type, n_origin = _ENVELOPE.unpack_from(data)
-        if magic != _EVENT_MAGIC:
-            raise wire.WireError(f"not an afa event (magic {magic!r})")
-        offset = _ENVELOPE.size
-        domain = bytes(data[offset:offset + n_domain]).decode()
-        event_type = bytes(data[offset + n_domain:offset + n_domain + n_type]).decode()
-        start = offset + n_domain + n_type
-        origin = bytes(data[start:start + n_origin]).decode()
-    except (struct.error, UnicodeDecodeError) as exc:
-        raise wire.WireError(f"bad event envelope: {exc}") from None
-    return domain, event_type, time, seq, origin
+        magic, time, seq, n_domain, n_type, n_origin = _ENVELOPE.unpack_from(view)
+    except struct.error:
+        raise wire.WireError("truncated event envelope") from None
+    if magic != _EVENT_MAGIC:
+        raise wire.WireError(f"not an afa event (magic {magic!r})")
+    if not math.isfinite(time):
+        raise wire.WireError(f"event time {time} is not a finite time stamp")
+    offset = _ENVELOPE.size
+    try:
+        names: list[str] = []
+        for n in (n_domain, n_type, n_origin):
+            names.append(bytes(view[offset:offset + n]).decode())
+            offset += n
+    except UnicodeDecodeError as exc:
+        raise wire.WireError(f"event names are not UTF-8: {exc}") from None
+    return names[0], names[1], time, seq, names[2], offset
 
 
 class Overflow(StrEnum):

@@ -250,8 +250,9 @@ def answer(reply: Any) -> tuple[int, bytes]:
     return kind, reply.ok.payload.to_bytes()
 
 
-def raw_event(type_name: str, body: Any, origin: str = "evil/component") -> bytes:
-    return Event("Raptor", type_name, 1.0, 1, body, origin).encode()
+def raw_event(type_name: str, body: Any, origin: str = "evil/component",
+              time: float = 1.0) -> bytes:
+    return Event("Raptor", type_name, time, 1, body, origin).encode()
 
 
 async def test_bad_events_from_a_peer_are_counted_and_never_delivered() -> None:
@@ -276,10 +277,13 @@ async def test_bad_events_from_a_peer_are_counted_and_never_delivered() -> None:
                                 elevation=3.0)))  # a type the Count subscribers refuse
             raw.put(keys.event("Raptor", "Count"), raw_event("Pose", Count(value=1)))
             raw.put(keys.event("Raptor", "Count"), good[:20])  # truncated
-            await eventually(lambda: sum(bridge.rejected.values()) >= 5,
-                             what="five bad events counted")
+            for stamp in (float("nan"), float("inf")):  # a time no clock gives
+                raw.put(keys.event("Raptor", "Count"), raw_event("Count", Count(value=9),
+                                                                 time=stamp))
+            await eventually(lambda: sum(bridge.rejected.values()) >= 7,
+                             what="seven bad events counted")
             assert bridge.rejected["wrong-type"] == 1 and bridge.rejected["mislabelled"] == 1
-            assert bridge.rejected["undecodable"] == 3
+            assert bridge.rejected["undecodable"] == 5
             assert [value for _, value, _, _ in doubler.seen] == [7]  # only the good one
             assert system.health()["doubler"].state.value == "running"
     finally:

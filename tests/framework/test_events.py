@@ -1,5 +1,6 @@
 """The event channel: fan-out, wildcards, bounded buffers, statistics, serialisation."""
 
+import math
 from typing import Annotated
 
 import numpy as np
@@ -7,6 +8,7 @@ import pydantic
 import pytest
 
 from afa import ChannelClosed, Event, EventChannel, Overflow, VirtualClock
+from afa.events import peek_envelope
 from idl import wire
 from idl._base import Array, IDLModel, field
 
@@ -150,6 +152,17 @@ def test_a_damaged_event_raises_wire_error_only():
     for cut in range(len(data)):
         with pytest.raises(wire.WireError):
             Event.decode(data[:cut])
+
+
+@pytest.mark.parametrize("stamp", [math.nan, math.inf, -math.inf])
+def test_an_event_whose_time_is_not_finite_is_refused_by_whoever_reads_it(stamp):
+    """A peer, a log or a console frame: a NaN or infinite stamp would reach a component
+    as its input's time (a filter fails on it, a log player schedules it nowhere)."""
+    data = Event("Raptor", "T", stamp, 1, Sample(value=1), "peer/x").encode()
+    with pytest.raises(wire.WireError, match="not a finite time stamp"):
+        Event.decode(data)
+    with pytest.raises(wire.WireError, match="not a finite time stamp"):
+        peek_envelope(data)
 
 
 def test_an_observer_has_its_own_buffer_and_counts_what_it_drops():
