@@ -42,9 +42,10 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import threading
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
@@ -65,6 +66,50 @@ _WELCOME_EVERY = 0.25
 _END_ACK_TIMEOUT = 5.0  # s of wall clock the master waits for followers to take the end
 #: Real seconds without quiescence after which the master logs its counters.
 _STALL_WARNING = 10.0
+
+
+def _number(value: Any) -> bool:
+    """A finite number: JSON's int or float, never a bool, NaN, ±Infinity or an int no
+    float holds."""
+    try:
+        return type(value) in (int, float) and math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def _count(value: Any) -> bool:
+    return type(value) is int and value >= 0
+
+
+def _counts(value: Any) -> bool:
+    return isinstance(value, dict) and all(_count(v) for v in value.values())
+
+
+def _text(value: Any) -> bool:
+    return isinstance(value, str)
+
+
+def _next(value: Any) -> bool:
+    return value is None or _number(value)
+
+
+#: Every field of every message (``op``: its fields and their checks). A message that
+#: is not one of these, whole, is counted (``bridge.rejected["time-message"]``) and
+#: dropped: a peer's typo cannot end a run.
+MESSAGES: dict[str, dict[str, Callable[[Any], bool]]] = {
+    # master -> follower
+    "welcome": {"start": _number, "t": _number},
+    "probe": {"round": _count, "t": _number},
+    "advance": {"t": _number},
+    "end": {},
+    # follower -> master
+    "ready": {"from": _text},
+    "report": {"from": _text, "round": _count, "t": _number, "next": _next,
+               "exported": _count, "seen": _counts, "qsent": _counts, "qrecv": _counts,
+               "rsent": _counts, "rrecv": _counts, "tsent": _count, "tseen": _counts},
+    "ended": {"from": _text},
+    "bye": {"from": _text},
+}
 
 
 class SteppedClock(VirtualClock):
@@ -173,6 +218,7 @@ class LockStep:
     """What the two roles share: messages, idleness, counters."""
 
     role = ""
+    receives: frozenset[str] = frozenset()  # the ops of the messages sent to this role
 
     def __init__(self, bridge: Bridge, system: Any) -> None:
         self.bridge = bridge
@@ -200,13 +246,23 @@ class LockStep:
             return
         try:
             message = json.loads(payload)
-        except ValueError:
+        except (ValueError, RecursionError):
+            message = None
+        op = message.get("op") if isinstance(message, dict) else None
+        fields = MESSAGES.get(op) if isinstance(op, str) and op in self.receives else None
+        if fields is None or not all(name in message and valid(message[name])
+                                     for name, valid in fields.items()):
+            self.refuse(f"{payload[:100]!r} is not a lock-step message for a {self.role}")
             return
-        if isinstance(message, dict):
-            self.handle(message)
+        self.handle(message)
 
     def handle(self, message: dict[str, Any]) -> None:
+        """A message of :attr:`receives` whose every field is valid (:data:`MESSAGES`)."""
         raise NotImplementedError
+
+    def refuse(self, why: str) -> None:
+        """Count and drop a time message (bad input from a peer never ends a run)."""
+        self.bridge._reject("time-message", f"lock-step: {why}")
 
     def on_process(self, process: str, present: bool) -> None:
         """A process's liveliness token appeared or disappeared."""
@@ -247,6 +303,7 @@ class TimeMaster(LockStep):
     """Probes the followers, checks quiescence, grants time (module docstring)."""
 
     role = "master"
+    receives = frozenset({"ready", "report", "ended", "bye"})
 
     def __init__(self, bridge: Bridge, system: Any, followers: list[str]) -> None:
         super().__init__(bridge, system)
@@ -315,6 +372,9 @@ class TimeMaster(LockStep):
             self.ready.add(sender)
             self._check_ready()
         elif op == "report":
+            if message["next"] is not None and message["next"] < message["t"]:
+                self.refuse(f"{sender}'s report has its next timer before its time")
+                return
             self._reports[sender] = message
             self._reports_in.set()
         elif op == "ended":  # a follower acknowledges "end": it may now see us go
@@ -498,6 +558,7 @@ class TimeFollower(LockStep):
     """Answers probes once idle, moves its clock when granted (module docstring)."""
 
     role = "follower"
+    receives = frozenset({"welcome", "probe", "advance", "end"})
 
     def __init__(self, bridge: Bridge, system: Any, master: str) -> None:
         super().__init__(bridge, system)
@@ -540,9 +601,13 @@ class TimeFollower(LockStep):
             if self._reporting is not None:
                 self._reporting.cancel()
             self._reporting = self.system.tasks.spawn(
-                self._report(int(message["round"]), float(message["t"])),
+                self._report(message["round"], float(message["t"])),
                 owner="bridge lock-step", name="bridge:time-report")
         elif op == "advance":
+            if message["t"] < self.clock.monotonic():
+                self.refuse(f"a grant of t={message['t']} would take time back from "
+                            f"t={self.clock.monotonic()}")
+                return
             self.clock.grant(float(message["t"]))
             self.grants += 1
         elif op == "end":

@@ -222,14 +222,16 @@ async def test_three_processes_share_events_and_names_once(peers: list[Peer]) ->
 
 
 class RawPeer:
-    """A bare Zenoh session on loopback that says what it likes (a broken peer)."""
+    """A bare Zenoh session on loopback that says what it likes (a broken peer): it
+    listens on ``port`` or connects to the processes listening on ``connect``."""
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int | None = None, *, connect: tuple[int, ...] = ()) -> None:
         self.zenoh = load_zenoh()
         config = self.zenoh.Config()
         config.insert_json5("mode", '"peer"')
         config.insert_json5("scouting/multicast/enabled", "false")
-        config.insert_json5("listen/endpoints", json.dumps([endpoint(port)]))
+        config.insert_json5("listen/endpoints", json.dumps([endpoint(port)] if port else []))
+        config.insert_json5("connect/endpoints", json.dumps([endpoint(p) for p in connect]))
         self.session = self.zenoh.open(config)
 
     def put(self, key: str, payload: bytes, attachment: bytes | None = None) -> None:
@@ -238,6 +240,18 @@ class RawPeer:
     def get(self, key: str, payload: bytes, attachment: bytes = b"raw\n") -> list[Any]:
         return [reply for reply in self.session.get(key, payload=payload,
                                                       attachment=attachment, timeout=5)]
+
+    def info(self, process: str) -> dict[str, Any]:
+        """The info document of ``process`` (blocking)."""
+        replies = [reply.ok for reply in self.get(keys.info("Raptor", process), b"")
+                   if reply.ok is not None]
+        assert replies, f"process {process} does not answer"
+        return json.loads(replies[0].payload.to_bytes())  # type: ignore[no-any-return]
+
+    def processes(self) -> set[str]:
+        """The processes whose token it sees: their subscriptions reach it (blocking)."""
+        tokens = self.session.liveliness().get(keys.alive_process("Raptor", "*"), timeout=5)
+        return {str(reply.ok.key_expr).rpartition("/")[2] for reply in tokens if reply.ok}
 
     def close(self) -> None:
         self.session.close()
@@ -349,6 +363,54 @@ async def test_a_flood_from_a_peer_is_bounded_and_counted() -> None:
             assert system.health()["doubler"].state.value == "running"
     finally:
         raw.close()
+
+
+def lockstep_pair() -> tuple[Peer, Peer, int, int]:
+    """A lock-step run (master a, follower b) long enough to outlive the test; both
+    listen, so that a raw peer reaches each."""
+    port_a, port_b = free_port(), free_port()
+    common = ["--clock", "stepped", "--members", "a,b"]
+    a = Peer(["-m", "tests.bridge.peer", "ls-a", "--process", "a", *common,
+              "--listen", endpoint(port_a), "--duration", "100000"])
+    b = Peer(["-m", "tests.bridge.peer", "ls-b", "--process", "b", *common,
+              "--listen", endpoint(port_b), "--connect", endpoint(port_a)])
+    return a, b, port_a, port_b
+
+
+async def test_malformed_time_messages_are_counted_and_the_run_goes_on(
+        peers: list[Peer]) -> None:
+    a, b, port_a, port_b = lockstep_pair()
+    peers += [a, b]
+    a.wait_ready()
+    b.wait_ready()
+    raw = RawPeer(connect=(port_a, port_b))
+    try:
+        await eventually(lambda: raw.processes() >= {"a", "b"}, what="a and b seen")
+        to_follower = ['{"op":"advance","t":"x"}', '{"op":"advance","t":NaN}',
+                       '{"op":"advance","t":1e400}', '{"op":"advance","t":-1.0}',
+                       '{"op":"probe","t":0.0}', '{"op":"welcome"}', '{"op":["end"]}',
+                       '{"op":"report"}', "[1]", "not json", "[" * 30_000]
+        to_master = ['{"op":"report","from":"b","round":1,"t":0.0,"seen":5}',
+                     '{"op":"ready"}', '{"op":"bye","from":7}', '{"op":"advance","t":1}']
+        for message in to_follower:
+            raw.put(keys.time_to("Raptor", "b"), message.encode())
+        for message in to_master:
+            raw.put(keys.time_to("Raptor", "a"), message.encode())
+
+        def refused(process: str) -> int:
+            return int(raw.info(process)["bridge"]["rejected"].get("time-message", 0))
+
+        await eventually(lambda: refused("b") == len(to_follower)
+                         and refused("a") == len(to_master),
+                         what="every malformed message counted")
+        before = raw.info("b")["clock"]["monotonic"]
+        await eventually(lambda: raw.info("b")["clock"]["monotonic"] > before,
+                         what="virtual time moving on")
+    finally:
+        raw.close()
+    a.stop()
+    assert a.wait() == 0 and b.wait() == 0, a.errors + b.errors
+    assert a.result()["t"] == b.result()["t"]  # ended together
 
 
 def test_a_missing_zenoh_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
