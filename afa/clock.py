@@ -374,6 +374,10 @@ class VirtualClock(Clock):
         return sum(1 for _, _, h in self._timers if not h.cancelled)
 
     def call_at(self, deadline: float, callback: Callable[[], object]) -> TimerHandle:
+        """As :meth:`Clock.call_at`; ValueError for a NaN deadline (it would be due
+        never and always: the order of every timer after it is lost)."""
+        if deadline != deadline:
+            raise ValueError("a timer's deadline cannot be NaN")
         handle = TimerHandle(max(deadline, self._t), callback)
         earliest = self._timers[0][0] if self._timers else None
         heapq.heappush(self._timers, (handle.deadline, next(self._order), handle))

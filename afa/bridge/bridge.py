@@ -620,14 +620,14 @@ class Bridge:
                                          payload.to_bytes() if payload is not None else b"")
             attachment = query.attachment
             caller = parse_caller(attachment.to_bytes() if attachment is not None else None)
-            if self.lockstep is not None and caller[2] is not None:
-                await self.clock.sleep_until(caller[2])  # the grant may still be on its way
             try:
                 check_command(interface, method, arguments, caller[:2],
                               self.parameters.AllowCommandFrom, server=full)
             except AfaError:
                 self.refused_commands += 1
                 raise
+            if self.lockstep is not None and caller[2] is not None:
+                await self.lockstep.reach(caller[2])  # the grant may still be on its way
             proxy = self._proxy(full, interface)
             result = await getattr(proxy, method)(**arguments)
             data = encode_result(interface, method, result)

@@ -47,11 +47,12 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from afa.bridge import keys
 from afa.clock import DEFAULT_EPOCH, VirtualClock
-from afa.errors import ComponentError
+from afa.errors import ComponentError, EOutOfBounds
 
 if TYPE_CHECKING:
     from afa.bridge.bridge import Bridge
@@ -267,6 +268,16 @@ class LockStep:
     def on_process(self, process: str, present: bool) -> None:
         """A process's liveliness token appeared or disappeared."""
 
+    async def reach(self, moment: float) -> None:
+        """Wait until this process's clock reaches ``moment``, the virtual time another
+        member made a call at (the grant of that time may still be on its way here).
+        Raises EOutOfBounds for a time that is not finite or that no grant reaches."""
+        raise NotImplementedError
+
+    def _beyond(self, moment: float) -> EOutOfBounds:
+        return EOutOfBounds(f"lock-step: a call made at t={moment!r} s, and no process "
+                            f"has been granted more than t={self.clock.monotonic()!r} s")
+
     # -- helpers ---------------------------------------------------------------------------
     def send(self, process: str, message: dict[str, Any]) -> None:
         session = self.bridge.session
@@ -362,6 +373,12 @@ class TimeMaster(LockStep):
                 self.fail(f"process {process} went away at t={self.clock.monotonic():.3f} s; "
                           "virtual time cannot go on without it")
             self._reports_in.set()
+
+    async def reach(self, moment: float) -> None:
+        """At once: the master grants itself each instant before anybody else hears of
+        it, so a call from a member is never ahead of it."""
+        if not (math.isfinite(moment) and moment <= self.clock.monotonic()):
+            raise self._beyond(moment)
 
     def handle(self, message: dict[str, Any]) -> None:
         op = message.get("op")
@@ -565,6 +582,7 @@ class TimeFollower(LockStep):
         self.master = master
         self._welcomed: asyncio.Event = asyncio.Event()
         self._reporting: asyncio.Task[Any] | None = None
+        self._awaited: list[tuple[float, asyncio.Future[None]]] = []  # reach()
 
     async def join(self) -> None:
         timeout = self.bridge.parameters.JoinTimeout
@@ -582,6 +600,28 @@ class TimeFollower(LockStep):
     async def _watch(self) -> None:
         assert self._failure is not None
         await self._failure
+
+    async def reach(self, moment: float) -> None:
+        """A follower may be behind the caller by grants still on their way: the call
+        waits for them without asking for that time (a timer would, the next grant being
+        the earliest timer of any member). The next probe tells the master's time; a
+        call still waiting for a later one is refused then."""
+        if not math.isfinite(moment):
+            raise self._beyond(moment)
+        if moment > self.clock.monotonic():
+            future = asyncio.get_running_loop().create_future()
+            self._awaited.append((moment, future))
+            await future
+
+    def _release(self, instant: float) -> None:
+        """Time is granted up to ``instant``: the calls waiting for it or an earlier
+        time become timers of the clock, which fire them in order."""
+        waiting, self._awaited = self._awaited, []
+        for moment, future in waiting:
+            if moment > instant:
+                self._awaited.append((moment, future))
+            elif not future.done():
+                self.clock.call_at(moment, partial(_resolve, future))
 
     def on_process(self, process: str, present: bool) -> None:
         if process == self.master and not present and self._welcomed.is_set() \
@@ -608,6 +648,7 @@ class TimeFollower(LockStep):
                 self.refuse(f"a grant of t={message['t']} would take time back from "
                             f"t={self.clock.monotonic()}")
                 return
+            self._release(float(message["t"]))
             self.clock.grant(float(message["t"]))
             self.grants += 1
         elif op == "end":
@@ -622,6 +663,10 @@ class TimeFollower(LockStep):
         if now != self.clock.monotonic():
             self.fail(f"probe for t={now} arrived at t={self.clock.monotonic()}")
             return
+        waiting, self._awaited = self._awaited, []  # later than the master's time
+        for moment, future in waiting:
+            if not future.done():
+                future.set_exception(self._beyond(moment))
         snapshot = await self.quiet()
         self.send(self.master, {"op": "report", "from": self.bridge.process,
                                 "round": number, "t": self.clock.monotonic(),

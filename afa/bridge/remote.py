@@ -73,7 +73,8 @@ def caller_attachment(process: str, zid: str, time: float | None = None) -> byte
 
 
 def parse_caller(attachment: bytes | None) -> tuple[str, str, float | None]:
-    """Inverse of :func:`caller_attachment` (empty names and None when absent)."""
+    """Inverse of :func:`caller_attachment` (empty names and None when absent; a time
+    that is not a number is NaN, which a server in lock-step refuses)."""
     if not attachment:
         return "", "", None
     process, _, rest = attachment.decode(errors="replace").partition("\n")
@@ -81,7 +82,7 @@ def parse_caller(attachment: bytes | None) -> tuple[str, str, float | None]:
     try:
         return process, zid, float(time) if time else None
     except ValueError:
-        return process, zid, None
+        return process, zid, math.nan
 
 
 #: The attachment of a reply: 0 for a result, 1 for an error; the server's virtual time

@@ -21,6 +21,7 @@ import pytest
 from afa import (
     CommandRefused,
     ComponentError,
+    EDevIO,
     EOutOfBounds,
     ETimeOut,
     Event,
@@ -411,6 +412,44 @@ async def test_malformed_time_messages_are_counted_and_the_run_goes_on(
     a.stop()
     assert a.wait() == 0 and b.wait() == 0, a.errors + b.errors
     assert a.result()["t"] == b.result()["t"]  # ended together
+
+
+async def test_a_call_stamped_beyond_every_grant_is_refused_and_holds_nothing(
+        peers: list[Peer]) -> None:
+    """In lock-step a call says when it was made; a time that is not a time, or later
+    than the time master's own, is refused at once: it neither waits forever in one of
+    the MaxQueries places nor pulls virtual time after it."""
+    from afa.polling import decode_error, encode_arguments
+
+    a, b, port_a, _ = lockstep_pair()
+    peers += [a, b]
+    a.wait_ready()
+    b.wait_ready()
+    raw = RawPeer(connect=(port_a,))
+    try:
+        await eventually(lambda: "a" in raw.processes(), what="a seen")
+        call = keys.poll("Raptor", "Counter", "getCount")
+        payload = encode_arguments(Counter, "getCount", {})
+        stamps = ["nan", "inf", "x"] + ["1e300"] * 70  # more than MaxQueries (64) at once
+        pending = [raw.session.get(call, payload=payload, timeout=10,
+                                   attachment=f"rogue\nz\n{stamp}".encode())
+                   for stamp in stamps]
+        errors = []
+        for replies in pending:
+            kind, data = answer(next(iter(replies)))
+            assert kind == ERROR
+            errors.append(decode_error(data))
+        assert all(isinstance(e, EOutOfBounds) for e in errors[:3]), errors[:3]
+        assert all(isinstance(e, EOutOfBounds | EDevIO) for e in errors)  # EDevIO: busy
+        kind, data = answer(raw.get(call, payload)[0])  # no place is held any more
+        assert kind == RESULT
+        before = raw.info("a")["clock"]["monotonic"]
+        await eventually(lambda: raw.info("a")["clock"]["monotonic"] > before,
+                         what="virtual time moving on")
+    finally:
+        raw.close()
+    a.stop()
+    assert a.wait() == 0 and b.wait() == 0, a.errors + b.errors
 
 
 def test_a_missing_zenoh_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:

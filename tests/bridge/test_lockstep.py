@@ -4,10 +4,15 @@ together, and a member that is missing or dies stops the run loudly."""
 
 from __future__ import annotations
 
+import asyncio
+import math
+
 import pytest
 
+from afa import EOutOfBounds, System
 from afa.assembly import _global_start
-from afa.bridge.lockstep import SteppedClock, TimeMaster
+from afa.bridge import Bridge, BridgeParameters
+from afa.bridge.lockstep import SteppedClock, TimeFollower, TimeMaster
 from afa.errors import ComponentError
 from tests.bridge.conftest import Peer
 from tests.bridge.parts import endpoint, free_port
@@ -32,6 +37,53 @@ async def test_a_stepped_clock_moves_only_when_granted() -> None:
         clock.grant(1.0)
     with pytest.raises(ComponentError, match="cannot be resumed"):
         clock.resume()
+
+
+async def test_a_call_made_ahead_of_a_follower_waits_for_its_grant_and_no_later() -> None:
+    """A member's call can overtake the grant of its time (decision 0011). The follower
+    waits for that grant without asking for the time (a timer would: every clock would
+    be pulled to whatever a caller stamped), and refuses a call from beyond the time the
+    next probe says the master has reached."""
+    clock = SteppedClock(start=0.0)
+    system = System([], clock=clock, process="b")
+    follower = TimeFollower(Bridge(BridgeParameters()), system, "a")  # it sends nothing
+    done: list[tuple[float, object]] = []
+
+    async def call(moment: float) -> None:
+        try:
+            await follower.reach(moment)
+            done.append((moment, clock.monotonic()))
+        except EOutOfBounds as exc:
+            done.append((moment, str(exc)))
+
+    calls = [asyncio.ensure_future(call(t)) for t in (0.5, 1e300)]
+    await clock.settle()
+    assert done == [] and clock.next_deadline() is None  # no time asked for
+    follower.handle({"op": "advance", "t": 0.5})
+    await clock.settle()
+    assert done == [(0.5, 0.5)]  # at the instant it was made at
+    async with system:  # its task group runs the report
+        follower.handle({"op": "probe", "round": 1, "t": 0.5})
+        await asyncio.gather(*calls)
+    assert done[1][0] == 1e300 and "granted more than t=0.5 s" in str(done[1][1])
+    for moment in (math.nan, math.inf):
+        with pytest.raises(EOutOfBounds):
+            await follower.reach(moment)
+
+
+async def test_the_master_refuses_a_call_made_later_than_its_own_time() -> None:
+    """The master grants itself each instant before any member hears of it: a call
+    stamped later than its clock was made at a time nobody was granted."""
+    clock = SteppedClock(start=0.0)
+    system = System([], clock=clock, process="a")
+    master = TimeMaster(Bridge(BridgeParameters()), system, ["b"])
+    clock.grant(2.0)
+    await master.reach(1.5)
+    await master.reach(2.0)
+    for moment in (2.5, 1e300, math.inf, math.nan):
+        with pytest.raises(EOutOfBounds, match="no process has been granted more than t=2.0"):
+            await master.reach(moment)
+    assert clock.next_deadline() is None
 
 
 def test_quiescence_needs_every_message_received() -> None:
@@ -117,9 +169,6 @@ async def test_a_call_taken_off_the_inbox_wakes_a_process_waiting_to_be_idle() -
     may wait for a later instant (``getWait…``); taking it off the inbox must wake the
     member, or it never reports idle, that instant is never granted, and the split run
     stalls (what hung the test above under load)."""
-    import asyncio
-
-    from afa.bridge import Bridge, BridgeParameters
     from afa.bridge.link import Inbox
 
     bridge = Bridge(BridgeParameters())

@@ -28,6 +28,19 @@ async def test_timers_fire_in_deadline_then_creation_order():
     assert fired == [("a", 1.0), ("d", 1.0), ("b", 2.0), ("c", 2.0)]
 
 
+async def test_a_nan_deadline_is_refused_and_the_timers_keep_their_order():
+    clock = VirtualClock(start=0.0)
+    fired = []
+    clock.call_at(2.0, lambda: fired.append(2.0))
+    with pytest.raises(ValueError, match="NaN"):
+        clock.call_at(float("nan"), lambda: fired.append("nan"))
+    with pytest.raises(ValueError, match="NaN"):
+        await clock.sleep_until(float("nan"))
+    clock.call_at(1.0, lambda: fired.append(1.0))
+    await clock.advance(3.0)
+    assert fired == [1.0, 2.0] and clock.monotonic() == 3.0
+
+
 async def test_time_stands_still_while_work_is_ready():
     clock = VirtualClock(start=0.0)
     seen = []
