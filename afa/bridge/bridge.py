@@ -119,7 +119,9 @@ class Bridge:
         self._info_queryable: Any = None
         self._query_callback: Any = None  # set by start(): queries into the inbox
         self._unwatch: Any = None
-        self._remote: dict[str, dict[str, type[Interface]]] = {}  # name -> {process: iface}
+        # name -> {liveliness token key: (process, interface)}: the other processes' offers
+        self._remote: dict[str, dict[str, tuple[str, type[Interface]]]] = {}
+        self._users: dict[str, list[type[Interface]]] | None = None  # name -> interfaces used
         self._proxies: dict[tuple[str, type[Interface]], Any] = {}
         self._accepts: dict[tuple[str, type], bool] = {}
         self._subscribers_of: list[Any] | None = None
@@ -473,7 +475,7 @@ class Bridge:
                 if rest[:1] == ["process"] and len(rest) == 2:
                     self._on_process(rest[1], present)
                 elif rest[:1] == ["name"] and len(rest) == 4:
-                    self._on_remote_name(rest[1], rest[2], rest[3], present)
+                    self._on_remote_name(key, rest[1], rest[2], rest[3], present)
             self.changed.set()
 
     def _on_process(self, process: str, present: bool) -> None:
@@ -485,24 +487,59 @@ class Bridge:
         else:
             self.peers.pop(process, None)
             log.info("bridge: process %s left", process)
-            for name in [n for n, offers in self._remote.items() if process in offers]:
-                self._drop_remote(name, process, f"its process {process} went away")
+            for name, offers in list(self._remote.items()):
+                self._drop_remote(name, [k for k, (p, _) in offers.items() if p == process],
+                                  f"its process {process} went away")
         if self.lockstep is not None:
             self.lockstep.on_process(process, present)
 
-    def _on_remote_name(self, name: str, process: str, qualified: str, present: bool) -> None:
+    def _on_remote_name(self, key: str, name: str, process: str, qualified: str,
+                        present: bool) -> None:
+        """A name token of another process: an offer of ``name``, known by its whole key
+        (its DELETE drops that offer and no other)."""
         if process == self.process or not self._imports(name):
             return
         if not present:
-            self._drop_remote(name, process, f"its process {process} withdrew it")
+            if key in self._remote.get(name, {}):
+                self._drop_remote(name, [key], f"its process {process} withdrew it")
+                self._recheck(key)
+            return
+        if key in self._remote.get(name, {}):
             return
         interface = find_interface(qualified)
         if interface is None:
             self._reject("unknown-interface", f"{process} serves {name} as {qualified}, an "
                                               "interface this program does not know")
             return
-        self._remote.setdefault(name, {})[process] = interface
+        if not all(issubclass(interface, used) for used in self._used(name)):
+            self._reject("wrong-interface", f"{process} serves {name} as {qualified}, which "
+                                            f"a user of {name} here cannot call")
+            return
+        self._remote.setdefault(name, {})[key] = (process, interface)
         self._bind_remote(name)
+
+    def _used(self, name: str) -> list[type[Interface]]:
+        """The interfaces the components of this process use ``name`` as."""
+        if self._users is None:
+            self._users = {}
+            for port in self.system.catalog().by(Direction.USES):
+                used = find_interface(port.types[0])
+                if not port.process and used is not None:
+                    self._users.setdefault(port.name, []).append(used)
+        return self._users.get(name, [])
+
+    def _recheck(self, key: str) -> None:
+        """Ask Zenoh whether the token ``key`` lives all the same (its DELETE came from a
+        spoofing peer, or a glitch): a live one is offered, and bound, again."""
+        alive = self._alive
+        if self.session is None or alive is None:
+            return
+
+        def on_reply(reply: Any) -> None:  # Zenoh's thread
+            if reply.ok is not None:
+                alive.push((str(reply.ok.key_expr), True))
+
+        self.session.liveliness().get(key, self.zenoh.handlers.Callback(on_reply))
 
     def _bind_remote(self, name: str) -> None:
         """Bind the first remote offer of ``name`` unless a local server holds it."""
@@ -513,24 +550,25 @@ class Bridge:
         offers = self._remote.get(name)
         if not offers:
             return
-        if isinstance(current, RemoteServant) and current.process in offers:
+        if isinstance(current, RemoteServant) and \
+                (current.process, current.interface) in offers.values():
             return
-        process, interface = next(iter(offers.items()))
+        process, interface = next(iter(offers.values()))
         self.system.registry.rebind(full, RemoteServant(self, name, interface, process),
                                     owner=self)
 
-    def _drop_remote(self, name: str, process: str | None, reason: str) -> None:
+    def _drop_remote(self, name: str, tokens: list[str] | None, reason: str) -> None:
+        """Drop the offers of ``name`` made by ``tokens`` (None: all); unbind the name if
+        the bound one is among them."""
         offers = self._remote.get(name, {})
-        if process is None:
-            offers.clear()
-        else:
-            offers.pop(process, None)
+        dropped = [offers.pop(token) for token in (list(offers) if tokens is None else tokens)
+                   if token in offers]
         if not offers:
             self._remote.pop(name, None)
         full = join_name(self.robot, name)
         current = self.system.registry.try_resolve(full)
-        if isinstance(current, RemoteServant) and (process is None
-                                                   or current.process == process):
+        if isinstance(current, RemoteServant) and \
+                (current.process, current.interface) in dropped:
             current.fail_pending(reason)
             self.system.registry.unbind(full)  # the watcher rebinds another offer, if any
 
@@ -685,7 +723,8 @@ class Bridge:
             "echoes": self.echoes,
             "unwanted": self.unwanted,
             "served": sorted(self._served),
-            "remote_names": {name: sorted(offers) for name, offers in self._remote.items()},
+            "remote_names": {name: sorted(p for p, _ in offers.values())
+                             for name, offers in self._remote.items()},
             "calls_served": self.served_calls,
             "calls_made": dict(self.traffic.queries_sent),
             "commands_refused": self.refused_commands,

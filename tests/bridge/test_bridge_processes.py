@@ -65,12 +65,13 @@ def peer_a(port: int, *extra: str) -> Peer:
                  "--listen", endpoint(port), *extra])
 
 
-def system_b(port: int, *, allow: list[str] | None = None, **parameters: Any) -> System:
+def system_b(*ports: int, allow: list[str] | None = None, **parameters: Any) -> System:
+    """Process b, connected to the processes listening on ``ports``."""
     system = System([CounterServer("counterB", served="CounterB", event="CountB"),
                      Doubler("doubler"), Poller("pollerB", served="Counter", period=0.2)],
                     clock=WallClock(), process="b")
-    Bridge(BridgeParameters(Listen=[], Connect=[endpoint(port)], AllowCommandFrom=allow or [],
-                            **parameters)).attach(system)
+    Bridge(BridgeParameters(Listen=[], Connect=[endpoint(port) for port in ports],
+                            AllowCommandFrom=allow or [], **parameters)).attach(system)
     return system
 
 
@@ -362,6 +363,49 @@ async def test_a_flood_from_a_peer_is_bounded_and_counted() -> None:
             counter = system.proxy(Counter, "CounterB")
             assert await counter.add(1, 2) == 3  # b still answers
             assert system.health()["doubler"].state.value == "running"
+    finally:
+        raw.close()
+
+
+async def test_a_spoofed_name_token_neither_unbinds_nor_takes_over_a_live_name(
+        peers: list[Peer]) -> None:
+    """A peer that declares a's name under other interfaces and withdraws them leaves
+    a's offer bound: an offer is known by its whole token, and one no user here can call
+    is never bound. A withdrawal of a's very token while it lives (Zenoh sends none,
+    but a lapsed lease or a spoofing router can) is checked with Zenoh: it binds again."""
+    port, rogue_port = free_port(), free_port()
+    a = peer_a(port)
+    peers.append(a)
+    a.wait_ready()
+    raw = RawPeer(rogue_port)
+    try:
+        async with system_b(port, rogue_port) as system:
+            bridge = bridge_of(system)
+            counter = await system.resolve(Counter, "Counter", timeout=10)
+            bound = system.registry.resolve("Raptor/Counter")
+            assert isinstance(bound, RemoteServant) and bound.process == "a"
+            liveliness = raw.session.liveliness()
+            claims = [liveliness.declare_token(keys.alive_name("Raptor", "Counter", "a", i))
+                      for i in ("bogus", "idl.interfaces.Gps")]
+            for claim in claims:
+                claim.undeclare()
+            marker = liveliness.declare_token(  # comes after the withdrawals
+                keys.alive_name("Raptor", "Marker", "rogue", "tests.bridge.parts.Counter"))
+            await eventually(lambda: "Marker" in bridge.statistics()["remote_names"],
+                             what="the claims and their withdrawals taken")
+            assert bridge.rejected["unknown-interface"] == 1
+            assert bridge.rejected["wrong-interface"] == 1  # the Poller here uses Counter
+            assert system.registry.resolve("Raptor/Counter") is bound  # never unbound
+            assert await counter.add(1, 2) == 3
+            bindings: list[Any] = []
+            system.registry.watch(lambda name, obj: name == "Raptor/Counter"
+                                  and bindings.append(obj))
+            token = keys.alive_name("Raptor", "Counter", "a", "tests.bridge.parts.Counter")
+            bridge._alive.push((token, False))  # as Zenoh's thread hands a withdrawal over
+            await eventually(lambda: len(bindings) >= 2, what="Counter bound again")
+            assert bindings[0] is None and isinstance(bindings[1], RemoteServant)
+            assert bindings[1].process == "a" and await counter.add(2, 3) == 5
+            marker.undeclare()
     finally:
         raw.close()
 
