@@ -77,6 +77,11 @@ log = logging.getLogger("afa.bridge")
 _SEQ = struct.Struct("<Q")
 #: How many times one kind of bad input is logged before it is only counted.
 _LOG_LIMIT = 5
+#: Items (events, tokens, queries) handled at a time; the loop turns between parts.
+_PART = 64
+#: Real seconds an info document answers for: a flood of info queries costs one document
+#: a second (names that change make a new one at once).
+_INFO_FOR = 1.0
 
 
 class Bridge:
@@ -141,6 +146,8 @@ class Bridge:
         self.echoes = 0
         self.unwanted = 0  # events that arrived for which this process has no subscriber
         self._logged: Counter[str] = Counter()
+        self._info: bytes | None = None  # the info document while it is current
+        self._info_expiry: asyncio.TimerHandle | None = None
 
     @property
     def clock(self) -> Any:
@@ -295,6 +302,7 @@ class Bridge:
                 self._answer_error(query, EDevIO("the serving process is stopping"))
         self._served.clear()
         self._publishers.clear()
+        self._forget_info()
         if session is not None:
             await close_session(session, self.system.clock)
 
@@ -351,7 +359,7 @@ class Bridge:
     async def _receive(self) -> None:
         assert self._data is not None
         while True:
-            batch = await self._data.batch()
+            batch = await self._data.batch(_PART)
             for key, payload in batch:
                 try:
                     robot, kind, rest = keys.parse(key)
@@ -422,6 +430,7 @@ class Bridge:
     # -- names out ----------------------------------------------------------------------------
     def _on_name(self, full: str, obj: Any) -> None:
         """Registry watcher: export local servants, keep remote bindings behind local ones."""
+        self._forget_info()  # the names it lists
         try:
             robot, _, name = full.partition("/")
             if robot != self.robot or self.session is None:
@@ -467,7 +476,7 @@ class Bridge:
     async def _liveliness(self) -> None:
         assert self._alive is not None
         while True:
-            for key, present in await self._alive.batch():
+            for key, present in await self._alive.batch(_PART):
                 try:
                     robot, kind, rest = keys.parse(key)
                 except ValueError:
@@ -602,7 +611,7 @@ class Bridge:
     async def _serve_queries(self) -> None:
         assert self._queries is not None
         while True:
-            for kind, query in await self._queries.batch():
+            for kind, query in await self._queries.batch(_PART):
                 if kind == "info":
                     self._answer_info(query)
                 elif self._serving >= self.parameters.MaxQueries:
@@ -612,9 +621,9 @@ class Bridge:
                 else:
                     self._serving += 1
                     self._spawn_query(query)
-            # the inbox is empty again: a lock-step member waiting to be idle must look
-            # again (a call that waits for a later instant sets nothing until it ends,
-            # and that instant is granted only once this process reports idle)
+            # a part of the inbox is taken: a lock-step member waiting to be idle must
+            # look again (a call that waits for a later instant sets nothing until it
+            # ends, and that instant is granted only once this process reports idle)
             self.changed.set()
 
     def _spawn_query(self, query: Any) -> None:
@@ -624,8 +633,7 @@ class Bridge:
 
     def _answer_info(self, query: Any) -> None:
         try:
-            document = process_info(self.system, self)
-            query.reply(query.key_expr, json.dumps(document, default=str).encode(),
+            query.reply(query.key_expr, self._info_document(),
                         encoding=self.zenoh.Encoding.APPLICATION_JSON)
         except Exception as exc:
             log.exception("bridge: answering an info query failed")
@@ -635,6 +643,21 @@ class Bridge:
             query.drop()
         except Exception:
             pass
+
+    def _info_document(self) -> bytes:
+        """What ``afa/<Robot>/info/<process>`` answers (:mod:`afa.bridge.info`), made at
+        most once every ``_INFO_FOR`` s of real time, and at once after names change."""
+        if self._info is None:
+            self._info = json.dumps(process_info(self.system, self), default=str).encode()
+            self._info_expiry = asyncio.get_running_loop().call_later(_INFO_FOR,
+                                                                      self._forget_info)
+        return self._info
+
+    def _forget_info(self) -> None:
+        self._info = None
+        if self._info_expiry is not None:
+            self._info_expiry.cancel()
+            self._info_expiry = None
 
     async def _serve(self, query: Any) -> None:
         """One remote call: decode, guard, run through the poll layer, answer."""

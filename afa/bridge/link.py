@@ -6,7 +6,8 @@ from Zenoh's threads to the event loop.
 Zenoh calls its callbacks on its own threads (one per subscriber or queryable). A
 callback must never block there, so it only appends to an :class:`Inbox` (a bounded
 deque under a lock) and, when the inbox was empty, schedules one wake-up of the loop
-with ``loop.call_soon_threadsafe``. The loop then takes the whole batch. A full inbox
+with ``loop.call_soon_threadsafe``. The loop then takes the batch, a part at a time if
+it asks (other tasks run between the parts: a flood cannot hold the loop). A full inbox
 drops its oldest item (events: the newest matter) or refuses the newest (queries: the
 caller is answered at once), and counts it.
 """
@@ -105,6 +106,7 @@ class Inbox(Generic[T]):
         self._lock = threading.Lock()
         self._scheduled = False
         self._ready = asyncio.Event()
+        self._partial = False  # the last batch() left items for the next
         self._closed = False
         self.received = 0  #: items pushed (counted on the pushing thread)
         self.dropped = 0   #: items dropped or refused because the inbox was full
@@ -144,15 +146,24 @@ class Inbox(Generic[T]):
         with self._lock:
             return len(self._items)
 
-    async def batch(self) -> list[T]:
-        """Everything queued, waiting until there is something (loop only)."""
+    async def batch(self, limit: int | None = None) -> list[T]:
+        """Everything queued, or its first ``limit`` items, waiting until there is
+        something (loop only). What a limited batch leaves comes with the next call,
+        after one turn of the loop: other tasks run between the parts of a flood."""
+        if self._partial:
+            await asyncio.sleep(0)
         while True:
             await self._ready.wait()
-            self._ready.clear()
             with self._lock:
-                items = list(self._items)
-                self._items.clear()
-                self._scheduled = False
+                if limit is None or len(self._items) <= limit:
+                    items = list(self._items)
+                    self._items.clear()
+                else:
+                    items = [self._items.popleft() for _ in range(limit)]
+                self._partial = bool(self._items)
+                if not self._partial:
+                    self._ready.clear()
+                    self._scheduled = False
             if items:
                 return items
 

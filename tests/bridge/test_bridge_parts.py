@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from afa import CommandRefused, ConfigError, System, VirtualClock
-from afa.bridge import BridgeParameters, bridge_parameters, keys
+from afa import CommandRefused, ConfigError, Event, System, VirtualClock
+from afa.bridge import Bridge, BridgeParameters, bridge_parameters, keys
 from afa.bridge.guard import check_command, commands
 from afa.bridge.link import Inbox
 from afa.bridge.parameters import off_loopback
@@ -21,7 +21,7 @@ from afa.errors import InterfaceError
 from afa.meter import LoopMeter
 from afa.tools.commands import parse_arguments, rate_report, render_top
 from idl import GlobalMap, Platform, VehicleControl, VehiclePlan, VelocityIDL
-from tests.bridge.parts import Counter, CounterServer
+from tests.bridge.parts import Count, Counter, CounterServer
 
 ROOT = Path(__file__).resolve().parents[2]
 RAPTOR = ROOT / "configs" / "raptor.xml"
@@ -171,6 +171,37 @@ async def test_the_inbox_bounds_and_counts_what_other_threads_hand_over() -> Non
     strict.close()
     strict.push(9)
     assert strict.take() == []
+
+
+async def test_a_flood_is_taken_in_parts_and_the_loop_turns_between_them() -> None:
+    """What a peer floods a process with (events here; tokens and queries alike) is
+    handled a part at a time, and every other task gets its turn between the parts: a
+    control loop is late by one part at most, not by the whole flood."""
+    system = System([], clock=VirtualClock(start=0.0), process="b")
+    bridge = Bridge(BridgeParameters()).attach(system)  # not started: no network
+    received = system.channel.subscribe("Raptor", "Count", maxsize=1000)
+    bridge._data = Inbox(asyncio.get_running_loop(), 1000)
+    frame = Event("Raptor", "Count", 1.0, 1, Count(value=1), "a/counter").encode()
+    for _ in range(300):
+        bridge._data.push((keys.event("Raptor", "Count"), frame))
+    seen: list[int] = []  # events delivered so far, at each turn of another task
+
+    async def other_task() -> None:
+        while True:
+            seen.append(received.statistics().queued)
+            await asyncio.sleep(0)
+
+    tasks = [asyncio.ensure_future(bridge._receive()), asyncio.ensure_future(other_task())]
+    try:
+        while received.statistics().queued < 300:
+            # none taken and not yet delivered: a lock-step member's idle() sees the rest
+            assert bridge._data.pending() + received.statistics().queued == 300
+            await asyncio.sleep(0)
+    finally:
+        for task in tasks:
+            task.cancel()
+    assert bridge.imported["Count"] == 300
+    assert len({n for n in seen if 0 < n < 300}) >= 2  # it ran while the flood was taken
 
 
 async def test_the_meter_gives_each_component_its_share_of_the_loop() -> None:

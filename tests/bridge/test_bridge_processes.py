@@ -28,6 +28,7 @@ from afa import (
     InterfaceError,
     NameNotFound,
     System,
+    VirtualClock,
     WallClock,
 )
 from afa.bridge import Bridge, BridgeParameters, keys
@@ -494,6 +495,37 @@ async def test_a_call_stamped_beyond_every_grant_is_refused_and_holds_nothing(
         raw.close()
     a.stop()
     assert a.wait() == 0 and b.wait() == 0, a.errors + b.errors
+
+
+async def test_info_answers_share_one_document_until_names_change() -> None:
+    """A flood of info queries costs one document a second (of real time), not one per
+    query; a name that appears is in the next answer all the same (``afa names`` right
+    after a start)."""
+    clock = VirtualClock(start=0.0)
+    system = System([CounterServer("counter")], clock=clock, process="b")
+    bridge = Bridge(BridgeParameters(Listen=[endpoint(free_port())])).attach(system)
+    documents: list[dict[str, Any]] = []
+
+    class InfoQuery:  # what Zenoh hands the bridge for afa/Raptor/info/b
+        key_expr = keys.info("Raptor", "b")
+
+        def reply(self, key: str, payload: bytes, **options: Any) -> None:
+            documents.append(json.loads(payload))
+
+        def drop(self) -> None:
+            pass
+
+    async with system:
+        await clock.advance(1.0)
+        bridge._answer_info(InfoQuery())
+        clock.step_wall(60.0)  # (no turn of the loop from here on: no second passes)
+        bridge._answer_info(InfoQuery())
+        system.registry.bind("Raptor/Extra", object())
+        bridge._answer_info(InfoQuery())
+    first, second, third = documents
+    assert second == first  # the same document: not made again
+    assert "Raptor/Extra" in {row["name"] for row in third["names"]}
+    assert third["clock"]["now"] == first["clock"]["now"] + 60.0  # made again, now
 
 
 def test_a_missing_zenoh_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
