@@ -19,7 +19,9 @@ runs one cycle every ``PlanEventInterval`` seconds:
    incrementally, the start moves with the vehicle, and the repair stops at an expansion
    budget beyond which an exact from-scratch plan is cheaper. If the vehicle is more than
    ``TrackingTolerance`` cells from the path it was following, the plan is rebuilt from
-   scratch, as the seed's "forced to re-plan";
+   scratch, as the seed's "forced to re-plan". The path followed is the rest of the last
+   one while that is passable and not clearly dearer than the new plan (hysteresis:
+   two ways round an obstacle that cost nearly the same do not alternate, decision 0043);
 5. a drivable path (:mod:`components.find_path.kinematic`, decision 0024): forward arcs
    within the arc set's curvature, the body as discs, from the vehicle to the D* path's
    point ``RefineDistance`` ahead (where that is the waypoint, a path ends with the rear
@@ -63,7 +65,7 @@ from components.waypoints import ground_point, to_local
 from idl import ArcVoteIDL, PlanMapEventIDL, PlannedPathIDL, Platform, TimeIDL, WaypointIDL
 from idl import GlobalMap as GlobalMapInterface
 
-__all__ = ["FindPath", "BEHAVIOUR", "CostGrid"]
+__all__ = ["FindPath", "BEHAVIOUR", "CostGrid", "path_cost"]
 
 BEHAVIOUR = "FindPath"
 #: How far along a drivable (refined) path the vote aims (m): two of its motions.
@@ -74,6 +76,14 @@ NO_PATH_UNHEALTHY = 5
 #: For a waypoint beyond the map, how far (m) from the limits' point nearest it a
 #: passable cell may be taken as the goal.
 BEYOND_SEARCH = 10.0
+#: Hysteresis between plans (decision 0043): the rest of the last path is kept while it
+#: is passable, the vehicle is within ``HOLD_DISTANCE`` cells of it, and it costs no more
+#: than the new plan's cost times ``1 + HOLD_SHARE`` plus ``HOLD_SLACK`` metres of
+#: cost-1 ground. Under the free-space assumption two ways round an obstacle seen in part
+#: often cost nearly the same, and the cheaper one alternated as the vehicle moved.
+HOLD_DISTANCE = 4.0
+HOLD_SHARE = 0.1
+HOLD_SLACK = 2.0
 #: A drivable path to the waypoint ends with the rear axle or the bumper's ground point
 #: within this share of the waypoint's tolerance (the rest absorbs tracking error).
 ARRIVAL_SHARE = 0.75
@@ -228,7 +238,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
                          "prior_changes": 0,
                          "no_path": 0, "cells_updated": 0, "poll_errors": 0,
                          "refined": 0, "undrivable": 0, "invalid_poses": 0,
-                         "unknown_frames": 0, "bumper_arrivals": 0}
+                         "unknown_frames": 0, "bumper_arrivals": 0, "held_paths": 0}
         self._no_path_streak = 0  # planning cycles in a row that found no path
         self._no_path_since = 0.0  # when the streak began (clock time)
         self.beyond = False  # the waypoint lies beyond the planning limits
@@ -293,7 +303,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             self._no_path(grid, waypoint, "no route reaches it" if status is
                           PlanStatus.NO_PATH else "the search ran out of its budget")
             return
-        self.path = self.planner.path()
+        self.path, path_cost = self._hold(grid, start, self.planner.path(),
+                                          self.planner.cost_to_goal())
         if self.front is None:
             await self._front_point()
         with Stopwatch() as watch:
@@ -327,7 +338,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         centres = np.array([grid.centre(c) for c in self.path], dtype=np.float64)
         self.paths.publish(PlannedPathIDL(time=stamp, points=centres.reshape(-1, 2),
                                           initialUTM=grid.initial_utm,
-                                          cost=self.planner.cost_to_goal(), goal=waypoint))
+                                          cost=path_cost, goal=waypoint))
         self._no_path_streak = 0
         if not pose.poseValidFlag:
             self.set_health(False, "planning from a pose marked invalid (poseValidFlag "
@@ -409,6 +420,25 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             return self.planner.rebuild()
         self.counters["replans"] += 1
         return self.planner.replan()
+
+    def _hold(self, grid: CostGrid, start: tuple[int, int], path: list[tuple[int, int]],
+              cost: float) -> tuple[list[tuple[int, int]], float]:
+        """The path to follow and its cost: the new plan ``path`` (of ``cost``), or the
+        rest of the last one from its cell nearest the vehicle, under the hysteresis of
+        ``HOLD_SHARE`` and ``HOLD_SLACK`` (decision 0043)."""
+        old = self.path
+        if not old or not path or old[-1] != path[-1]:
+            return path, cost  # nothing to hold, or another goal
+        distances = [math.hypot(start[0] - c[0], start[1] - c[1]) for c in old]
+        k = int(np.argmin(distances))
+        if distances[k] > HOLD_DISTANCE:
+            return path, cost
+        rest = old[k:]
+        held = path_cost(grid.cost, rest if rest[0] == start else [start, *rest])
+        if held <= cost * (1.0 + HOLD_SHARE) + HOLD_SLACK / grid.gridsize and held != cost:
+            self.counters["held_paths"] += 1
+            return rest, held
+        return path, cost
 
     def _refine(self, grid: CostGrid, pose: tuple[float, float, float]
                 ) -> tuple[Refined | None, bool]:
@@ -525,6 +555,17 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         if self.planner is not None:
             stats["planner"] = dataclasses.asdict(self.planner.statistics())
         return stats
+
+
+def path_cost(cost: np.ndarray, cells: list[tuple[int, int]]) -> float:
+    """What D* Lite charges along ``cells`` (each step: its length in cells times the cost
+    of the cell it enters; inf through an impassable one). Consecutive cells need not be
+    neighbours (the first step, from the vehicle onto a held path)."""
+    if len(cells) < 2:
+        return 0.0
+    ij = np.asarray(cells, dtype=np.intp)
+    steps = np.hypot(*np.diff(ij, axis=0).T)
+    return float(np.sum(steps * cost[ij[1:, 0], ij[1:, 1]]))
 
 
 def _straight(origin: tuple[float, float], points: list[tuple[float, float]],

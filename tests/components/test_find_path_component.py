@@ -373,3 +373,30 @@ async def test_off_the_path_by_more_than_the_tracking_tolerance_it_plans_afresh(
     assert stats["tracking_replans"] == 1
     assert math.dist(path.points[0], (4.0, -(tolerance + 2) * CELL)) <= CELL
     assert math.dist(path.points[-1], (16.0, 0.0)) <= goal.tolerance + CELL
+
+
+async def test_it_holds_its_way_round_a_wall_until_the_other_is_much_cheaper_or_it_is_blocked():
+    """Hysteresis between plans (decision 0043): two ways round a wall that cost nearly
+    the same do not alternate as the vehicle moves; a blocked way is left at once."""
+    goal = waypoint(16.0, 0.0)
+    wall: Box = (8.0, 9.0, -6.0, 6.0)  # across the line, both ends 6 m off it
+    async with rig(goal, [wall]) as r:
+        await r.until(2.5)
+        first = r.drain(r.paths)[-1].body.points
+        side = float(np.sign(first[np.argmin(np.abs(first[:, 0] - 8.5)), 1]))
+        assert side != 0.0
+        # a metre towards the other end: that way is now the shorter, by about a metre
+        r.pose.place(0.0, -side * 1.0)
+        await r.until(3.5)
+        held = r.drain(r.paths)[-1].body.points
+        optimal = np.array([r.planner.grid.centre(c) for c in r.planner.planner.path()])
+        # the held way still passes the wall on the first side; D* alone would switch
+        assert np.sign(held[np.argmin(np.abs(held[:, 0] - 8.5)), 1]) == side
+        assert np.sign(optimal[np.argmin(np.abs(optimal[:, 0] - 8.5)), 1]) == -side
+        assert r.planner.statistics()["held_paths"] >= 1
+        # the wall turns out to run on past the held end: that way is blocked
+        r.sense([wall, (8.0, 9.0, 6.0, 19.0) if side > 0 else (8.0, 9.0, -19.0, -6.0)])
+        await r.until(5.5)
+        switched = r.drain(r.paths)[-1].body.points
+    assert np.sign(switched[np.argmin(np.abs(switched[:, 0] - 8.5)), 1]) == -side
+    assert clearance(switched, wall) >= HALF_WIDTH
