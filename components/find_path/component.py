@@ -82,8 +82,8 @@ BEYOND_SEARCH = 10.0
 #: cost-1 ground. Under the free-space assumption two ways round an obstacle seen in part
 #: often cost nearly the same, and the cheaper one alternated as the vehicle moved.
 HOLD_DISTANCE = 4.0
-HOLD_SHARE = 0.1
-HOLD_SLACK = 2.0
+HOLD_SHARE = 0.05
+HOLD_SLACK = 1.0
 #: A drivable path to the waypoint ends with the rear axle or the bumper's ground point
 #: within this share of the waypoint's tolerance (the rest absorbs tracking error).
 ARRIVAL_SHARE = 0.75
