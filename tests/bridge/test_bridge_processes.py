@@ -423,6 +423,19 @@ def lockstep_pair() -> tuple[Peer, Peer, int, int]:
     return a, b, port_a, port_b
 
 
+async def time_moves_on(raw: RawPeer, process: str) -> None:
+    """Virtual time in ``process`` (its info document's clock) goes on from now."""
+    before = raw.info(process)["clock"]["monotonic"]
+    await eventually(lambda: raw.info(process)["clock"]["monotonic"] > before,
+                     what=f"virtual time moving on in {process}")
+
+
+def stop_together(a: Peer, b: Peer) -> None:
+    """Stop the lock-step pair at the master; both must end cleanly."""
+    a.stop()
+    assert a.wait() == 0 and b.wait() == 0, a.errors + b.errors
+
+
 async def test_malformed_time_messages_are_counted_and_the_run_goes_on(
         peers: list[Peer]) -> None:
     a, b, port_a, port_b = lockstep_pair()
@@ -449,13 +462,10 @@ async def test_malformed_time_messages_are_counted_and_the_run_goes_on(
         await eventually(lambda: refused("b") == len(to_follower)
                          and refused("a") == len(to_master),
                          what="every malformed message counted")
-        before = raw.info("b")["clock"]["monotonic"]
-        await eventually(lambda: raw.info("b")["clock"]["monotonic"] > before,
-                         what="virtual time moving on")
+        await time_moves_on(raw, "b")
     finally:
         raw.close()
-    a.stop()
-    assert a.wait() == 0 and b.wait() == 0, a.errors + b.errors
+    stop_together(a, b)
     assert a.result()["t"] == b.result()["t"]  # ended together
 
 
@@ -488,13 +498,10 @@ async def test_a_call_stamped_beyond_every_grant_is_refused_and_holds_nothing(
         assert all(isinstance(e, EOutOfBounds | EDevIO) for e in errors)  # EDevIO: busy
         kind, data = answer(raw.get(call, payload)[0])  # no place is held any more
         assert kind == RESULT
-        before = raw.info("a")["clock"]["monotonic"]
-        await eventually(lambda: raw.info("a")["clock"]["monotonic"] > before,
-                         what="virtual time moving on")
+        await time_moves_on(raw, "a")
     finally:
         raw.close()
-    a.stop()
-    assert a.wait() == 0 and b.wait() == 0, a.errors + b.errors
+    stop_together(a, b)
 
 
 async def test_info_answers_share_one_document_until_names_change() -> None:
