@@ -303,8 +303,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             self._no_path(grid, waypoint, "no route reaches it" if status is
                           PlanStatus.NO_PATH else "the search ran out of its budget")
             return
-        self.path, path_cost = self._hold(grid, start, self.planner.path(),
-                                          self.planner.cost_to_goal())
+        self.path, followed_cost = self._hold(grid, start, self.planner.path(),
+                                              self.planner.cost_to_goal())
         if self.front is None:
             await self._front_point()
         with Stopwatch() as watch:
@@ -338,7 +338,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         centres = np.array([grid.centre(c) for c in self.path], dtype=np.float64)
         self.paths.publish(PlannedPathIDL(time=stamp, points=centres.reshape(-1, 2),
                                           initialUTM=grid.initial_utm,
-                                          cost=path_cost, goal=waypoint))
+                                          cost=followed_cost, goal=waypoint))
         self._no_path_streak = 0
         if not pose.poseValidFlag:
             self.set_health(False, "planning from a pose marked invalid (poseValidFlag "
