@@ -53,7 +53,9 @@ class ConsoleOptions:
     components and commanding the vehicle from the page. ``host_names`` are names the
     page may be opened by (``vehicle.lan``) besides the loopback names, or, beyond
     loopback, IP addresses. ``reference_frame`` is the frame of the 3-D view. ``rates``
-    overrides default stream rates per kind.
+    overrides default stream rates per kind. ``max_pages`` is how many pages (WebSockets)
+    may be connected at once; one more is refused (503) and counted, so a client opening
+    sockets in a loop cannot make the server copy every frame to thousands of them.
     """
 
     host: str = "127.0.0.1"
@@ -63,6 +65,7 @@ class ConsoleOptions:
     reference_frame: str = "Raptor:RearAxleCenter"
     status_period: float = 1.0
     rates: dict[str, float] = field(default_factory=dict)
+    max_pages: int = 16
 
 
 def _require_server() -> None:
@@ -116,7 +119,7 @@ class Console:
         from afa.console.server import ConsoleServer
 
         await self.hub.start()
-        server = ConsoleServer(self.hub, self.guard)
+        server = ConsoleServer(self.hub, self.guard, max_pages=self.options.max_pages)
         # the server's connection tasks inherit this context: the profiler knows them
         token = CONSOLE_TASK.set(True)
         try:

@@ -80,8 +80,12 @@ def _static_files() -> dict[str, tuple[bytes, str]]:
 class ConsoleServer:
     """aiohttp application, runner and site for one :class:`ConsoleHub`."""
 
-    def __init__(self, hub: ConsoleHub, guard: ControlGuard) -> None:
+    def __init__(self, hub: ConsoleHub, guard: ControlGuard, *, max_pages: int = 16) -> None:
+        if max_pages < 1:
+            raise ValueError(f"max_pages must be at least 1, got {max_pages}")
         self.hub = hub
+        self.max_pages = max_pages
+        self._pages = 0  # WebSockets accepted and not yet ended (counted before prepare)
         self.guard = guard
         self.files = _static_files()
         self.app = web.Application(middlewares=[self._headers],
@@ -172,6 +176,17 @@ class ConsoleServer:
 
     # -- data ----------------------------------------------------------------------------
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
+        if self._pages >= self.max_pages:
+            self._note("page", logging.WARNING, "console: refused a page from %s: %d are "
+                       "connected, the most it serves", request.remote, self._pages)
+            return _error(503, f"the console serves at most {self.max_pages} pages at once")
+        self._pages += 1
+        try:
+            return await self._page(request)
+        finally:
+            self._pages -= 1
+
+    async def _page(self, request: web.Request) -> web.StreamResponse:
         ws = web.WebSocketResponse(heartbeat=30.0, max_msg_size=_MAX_INCOMING,
                                    compress=False)
         await ws.prepare(request)

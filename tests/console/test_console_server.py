@@ -242,6 +242,33 @@ async def test_input_the_server_cannot_use_is_refused_or_ignored_and_counted():
         await finish(system, console)
 
 
+async def test_pages_beyond_the_limit_are_refused_until_one_closes():
+    """A client opening WebSockets in a loop: the server copies every frame to each page,
+    so beyond ``max_pages`` the next is refused (503) and counted; a page that closes
+    frees its place."""
+    system, console = await running(max_pages=2)
+    url, origin = base(console) + "/ws", {"Origin": base(console)}
+    try:
+        async with aiohttp.ClientSession() as http:
+            pages = [await http.ws_connect(url, headers=origin) for _ in range(2)]
+            for page in pages:
+                assert decode_frame(await page.receive_bytes(timeout=5))[0]["kind"] == "hello"
+            with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                await http.ws_connect(url, headers=origin)
+            assert refused.value.status == 503
+            status = await (await http.get(base(console) + "/api/status")).json()
+            assert status["console"]["rejected"] == {"page": 1}
+            await pages[0].close()
+            await until(lambda: len(console.hub.sessions) == 1, WallClock(), timeout=10,
+                        what="the closed page's place freed")
+            again = await http.ws_connect(url, headers=origin)
+            assert decode_frame(await again.receive_bytes(timeout=5))[0]["kind"] == "hello"
+            await again.close()
+            await pages[1].close()
+    finally:
+        await finish(system, console)
+
+
 async def raw_request(port, request):
     """The server's whole answer to ``request`` (bytes), sent as is."""
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
