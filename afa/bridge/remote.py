@@ -21,11 +21,12 @@ from __future__ import annotations
 import asyncio
 import math
 import struct
+from collections.abc import Awaitable, Callable
 from functools import cache
 from typing import TYPE_CHECKING, Any
 
 from afa.bridge import keys
-from afa.errors import NameNotFound
+from afa.errors import EOutOfBounds, NameNotFound
 from afa.polling import decode_error, decode_result, encode_arguments
 from afa.ports import interface_name
 from idl._base import Interface
@@ -113,12 +114,16 @@ class RemoteCall:
     def __init__(self, zenoh: Any, session: Any, robot: str, name: str,
                  interface: type[Interface], method: str, arguments: dict[str, Any],
                  attachment: bytes, *, traffic: Traffic | None = None, process: str = "",
-                 on_done: Any = None, clock: Any = None) -> None:
-        """``clock``: in lock-step, a reply stamped later than this clock's time waits
-        for it (the grant of that time may still be on its way)."""
+                 on_done: Any = None, clock: Any = None,
+                 reach: Callable[[float], Awaitable[None]] | None = None) -> None:
+        """``clock`` and ``reach``: in lock-step, a reply stamped later than this clock's
+        time waits until ``reach`` (the lock-step's) says the clock is there: the grant
+        of that time may still be on its way. A stamp no grant reaches (a rogue or
+        broken server's) answers the call with EOutOfBounds rather than holding it."""
         payload = encode_arguments(interface, method, arguments)  # InterfaceError if bad
         loop = asyncio.get_running_loop()
         self.future: asyncio.Future[Any] = loop.create_future()
+        self._held: asyncio.Task[None] | None = None  # a reply waiting for its time
         future = self.future
         replies: list[Any] = []
         label = f"{robot}/{name}"
@@ -142,11 +147,24 @@ class RemoteCall:
                 return
             attachment = reply.ok.attachment
             kind, when = parse_reply(attachment.to_bytes() if attachment is not None else None)
-            if clock is not None and when is not None and when > clock.monotonic():
+            if clock is not None and reach is not None and when is not None \
+                    and when > clock.monotonic():
                 # lock-step: the answer overtook the grant of its time; hold it until then
-                clock.call_at(when, lambda: resolve(kind, reply))
+                self._held = loop.create_task(hold(when, kind, reply))
             else:
                 resolve(kind, reply)
+
+        async def hold(when: float, kind: int, reply: Any) -> None:
+            assert reach is not None
+            try:
+                await reach(when)
+            except EOutOfBounds as exc:
+                if not future.done():
+                    future.set_exception(EOutOfBounds(
+                        f"{label}: the reply is stamped t={when!r} s, a time no grant "
+                        f"reaches ({exc})"))
+                return
+            resolve(kind, reply)
 
         def resolve(kind: int, reply: Any) -> None:
             if future.done():
@@ -220,7 +238,8 @@ class RemoteServant:
                           self.interface, method, arguments,
                           bridge.caller(bridge.clock.monotonic() if lockstep else None),
                           traffic=bridge.traffic, process=self.process,
-                          on_done=bridge.changed.set, clock=bridge.clock if lockstep else None)
+                          on_done=bridge.changed.set, clock=bridge.clock if lockstep else None,
+                          reach=bridge.lockstep.reach if lockstep else None)
         self.calls += 1
         self._pending.add(call.future)
         try:

@@ -86,6 +86,50 @@ async def test_the_master_refuses_a_call_made_later_than_its_own_time() -> None:
     assert clock.next_deadline() is None
 
 
+async def test_a_reply_stamped_beyond_every_grant_is_refused_not_held() -> None:
+    """A reply may overtake the grant of the time it was made at, and then waits for it;
+    a reply stamped at a time nobody was granted (a rogue or broken server) answers the
+    call with EOutOfBounds instead of holding it until that virtual time."""
+    import zenoh
+
+    from afa.bridge import keys
+    from afa.bridge.link import session_config
+    from afa.bridge.remote import RESULT, RemoteCall, caller_attachment, reply_attachment
+    from afa.polling import encode_result
+    from idl import GlobalMap, PlanPointIDL
+
+    clock = SteppedClock(start=0.0)
+    master = TimeMaster(Bridge(BridgeParameters()), System([], clock=clock, process="a"),
+                        ["b"])
+    clock.grant(2.0)
+    key = keys.poll("Raptor", "GlobalMap", "valid")
+    stamp = [0.0]
+
+    def reply(query: zenoh.Query) -> None:
+        query.reply(key, encode_result(GlobalMap, "valid", True),
+                    attachment=reply_attachment(RESULT, stamp[0]))
+
+    with zenoh.open(session_config(BridgeParameters(), listen=[endpoint(free_port())])
+                    ) as session:
+        rogue = session.declare_queryable(key, reply)
+        try:
+            async def call() -> object:
+                remote = RemoteCall(zenoh, session, "Raptor", "GlobalMap", GlobalMap,
+                                    "valid", {"p": PlanPointIDL(x=1, y=2)},
+                                    caller_attachment("a", "zid", clock.monotonic()),
+                                    clock=clock, reach=master.reach)
+                return await asyncio.wait_for(remote.result(), 30.0)
+
+            for stamp[0] in (1.5, 2.0):  # made at a granted time: answered at once
+                assert await call() is True
+            for stamp[0] in (2.5, 1e300):
+                with pytest.raises(EOutOfBounds, match="the reply is stamped t="):
+                    await call()
+        finally:
+            rogue.undeclare()
+    assert clock.next_deadline() is None  # nobody's time was asked for
+
+
 def test_quiescence_needs_every_message_received() -> None:
     master = TimeMaster.__new__(TimeMaster)
     master.bridge = type("B", (), {"process": "m"})()  # type: ignore[assignment]
