@@ -28,11 +28,12 @@ runs one cycle every ``PlanEventInterval`` seconds:
    axle near it, or with the ground under the bumper, ``GroundFrame`` from ModelServer,
    where the rear axle cannot come: the Global Map's arrival rule, decision 0042); the
    vote is a narrow Gaussian around the curvature that reaches its point 1.5 m ahead
-   (κ = 2y/D²). When there is none (the vehicle
-   stands where no forward path leads onto the plan) every arc is vetoed and the
-   arbiter backs out. With refinement off (``RefineDistance`` 0) the look-ahead point is
-   the farthest point of the D* path between ``MinLookahead`` and ``MaxLookahead`` cells
-   along it to which the path runs nearly straight (within half a cell). The vote is
+   (κ = 2y/D²), narrower still on the final approach (decision 0044). When there is
+   none (the vehicle stands where no forward path leads onto the plan) every arc is
+   vetoed and the arbiter backs out. With refinement off (``RefineDistance`` 0) the
+   look-ahead point is the farthest point of the D* path between ``MinLookahead`` and
+   ``MaxLookahead`` cells along it to which the path runs nearly straight (within half a
+   cell). The vote is
    published as an ``ArcVote`` (behaviour ``FindPath``), and the D* path as
    ``PlannedPath`` for displays. A waypoint beyond the map's planning limits is planned
    to the passable cell nearest it on the limits (the Global Map moves its grid along a
@@ -87,6 +88,14 @@ HOLD_SLACK = 1.0
 #: A drivable path to the waypoint ends with the rear axle or the bumper's ground point
 #: within this share of the waypoint's tolerance (the rest absorbs tracking error).
 ARRIVAL_SHARE = 0.75
+#: The vote's spread about a drivable path (m of miss at its look-ahead point, one σ).
+#: On the way, 0.1 m: σ spans about four arcs of the Raptor's set, so Obstacle
+#: Avoidance's preference for room weighs in the choice among them. On the final
+#: approach, 0.03 m (about one arc, decision 0044): that path ends in the waypoint's
+#: arrival region, often at the end of a tight turn, and an arc one step straighter each
+#: cycle drifted the vehicle past the region and round the waypoint again.
+ON_THE_WAY_SPREAD = 0.1
+ARRIVING_SPREAD = 0.03
 
 
 class CostGrid:
@@ -308,15 +317,14 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         if self.front is None:
             await self._front_point()
         with Stopwatch() as watch:
-            self.refined, undrivable = self._refine(grid, (x, y, yaw))
+            self.refined, undrivable, arriving = self._refine(grid, (x, y, yaw))
         self.refine_times.append(watch.seconds)
         del self.refine_times[:-1000]
         if self.refined is not None:
             # a drivable path starts at the vehicle: steer by its next metres (pursuit
-            # of a point on an arc through the vehicle gives that arc's curvature), a
-            # Gaussian as narrow as Pure Pursuit's
+            # of a point on an arc through the vehicle gives that arc's curvature)
             point = self.refined.at(REFINED_LOOKAHEAD)
-            spread = 0.1  # m of miss at the look-ahead point, one σ
+            spread = ARRIVING_SPREAD if arriving else ON_THE_WAY_SPREAD
         else:
             # the D* path (refinement off, or no drivable way onto the plan: then every
             # arc is vetoed below, the arbiter backs out to make room, and the votes
@@ -441,17 +449,18 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         return path, cost
 
     def _refine(self, grid: CostGrid, pose: tuple[float, float, float]
-                ) -> tuple[Refined | None, bool]:
+                ) -> tuple[Refined | None, bool, bool]:
         """A drivable path (:mod:`components.find_path.kinematic`) from the vehicle to
         the D* path's point ``RefineDistance`` ahead (its end if nearer), in any heading:
         beyond a gate, the gate aligns it. Where that is the path's end, the waypoint's
         cell, the path ends where the Global Map counts the waypoint reached
-        (:meth:`_to_waypoint`). Returns the path, and whether the search found none (the
-        vehicle must back out first); (None, False) when refinement is off or the path
+        (:meth:`_to_waypoint`). Returns the path, whether the search found none (the
+        vehicle must back out first), and whether it is the final approach (the path
+        ends at the waypoint); (None, False, False) when refinement is off or the path
         is a single cell."""
         p = self.parameters
         if p.RefineDistance <= 0.0 or len(self.path) < 2:
-            return None, False
+            return None, False, False
         centres = [grid.centre(c) for c in self.path]
         travelled, k = 0.0, 0
         while k + 1 < len(centres) and travelled < p.RefineDistance:
@@ -469,12 +478,14 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
                                       pose, (*centres[k], None), curvature=self._steering,
                                       open_cost=2.0 * p.MarginCost, arrival=arrival)
 
-        if k + 1 < len(centres) or self.beyond or self.waypoint is None:
-            refined = search(None)
-        else:
+        arriving = not (k + 1 < len(centres) or self.beyond or self.waypoint is None)
+        if arriving:
+            assert self.waypoint is not None
             refined = self._to_waypoint(search, *self.waypoint)
+        else:
+            refined = search(None)
         self.counters["refined" if refined is not None else "undrivable"] += 1
-        return refined, refined is None
+        return refined, refined is None, arriving
 
     def _to_waypoint(self, search: Callable[[Arrival | None], Refined | None], x: float,
                      y: float, tolerance: float) -> Refined | None:

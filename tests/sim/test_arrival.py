@@ -10,8 +10,10 @@ towards a waypoint the others count reached (the vehicle wandered round the wall
 rest of the run when only FindPath and the Global Map took the bumper).
 """
 
+import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from afa import VirtualClock
@@ -52,3 +54,60 @@ async def test_a_waypoint_short_of_a_wall_is_reached_straight_and_the_vehicle_st
     assert settled["distance_m"] - done["distance_m"] < 3.0
     assert after["distance_m"] - settled["distance_m"] < 0.05
     assert after["collisions"] == []
+
+
+BESIDE = """<?xml version="1.0" encoding="UTF-8"?>
+<world name="beside">
+  <origin latitude="45.3" longitude="-75.9" elevation="100.0"/>
+  <terrain width="60" depth="60" resolution="0.1" roughness="0.03" seed="5"/>
+  <vehicle east="0" north="0" heading="0"/>
+  <mission patrol="false"><waypoint east="{east}" north="0"/></mission>
+</world>
+"""
+#: The Raptor's tightest turn (30 degrees of steering lock on a 1.9 m wheelbase), of which
+#: the planners use 90 % (decision 0024); its bumper's ground point 2.45 m ahead of the
+#: rear axle; the waypoints' tolerance.
+RADIUS = 1.9 / math.tan(math.radians(30.0)) / 0.9
+BUMPER = 2.45
+TOLERANCE = 2.0
+
+
+def swing_out(beside: float) -> float:
+    """The shortest of one family of drivable courses to a waypoint ``beside`` metres to
+    the side (right positive) of a vehicle at the origin: straight ahead for d metres,
+    then the tightest turn towards it, until the rear axle or the bumper comes within
+    the tolerance. (Geometry only: a course the vehicle can drive, so the best is no
+    longer.)"""
+    side = math.copysign(1.0, beside)
+    best = math.inf
+    for d in np.arange(0.0, 20.0, 0.01):
+        turned = np.radians(np.arange(0.0, 360.0, 0.1))
+        x = side * RADIUS * (1.0 - np.cos(turned))
+        y = d + RADIUS * np.sin(turned)
+        fx, fy = x + BUMPER * side * np.sin(turned), y + BUMPER * np.cos(turned)
+        near = np.minimum(np.hypot(x - beside, y), np.hypot(fx - beside, fy)) <= TOLERANCE
+        if near.any():
+            best = min(best, d + RADIUS * float(turned[np.argmax(near)]))
+    return best
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("east", [4.0, -4.0], ids=["right", "left"])
+async def test_a_waypoint_inside_the_turning_circle_is_reached_without_circling_it(
+        tmp_path, east):
+    # The waypoint lies 4 m beside the vehicle, inside its turning circle: no arc brings
+    # the vehicle within its tolerance, so it must swing out and come back. Each drivable
+    # path there ends in a tight turn; while the arbiter took a slightly straighter arc
+    # than that turn (FindPath's vote was flat over five arcs, decision 0044), the
+    # vehicle slid outside the path at every cycle, passed the waypoint just out of
+    # tolerance and circled it: 26.7 m to arrive on the right, against a swing-out of
+    # 16.1 m.
+    world = tmp_path / "beside.xml"
+    world.write_text(BESIDE.format(east=east))
+    simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml", world,
+                                           clock=VirtualClock(), seed=0)
+    async with simulation:
+        assert await simulation.run_mission()
+        done = simulation.summary()
+    assert done["mission_complete"] and done["collisions"] == []
+    assert done["mission_distance_m"] <= 1.25 * swing_out(east), done["mission_distance_m"]
