@@ -33,14 +33,13 @@ runs one cycle every ``PlanEventInterval`` seconds:
    vetoed and the arbiter backs out. With refinement off (``RefineDistance`` 0) the
    look-ahead point is the farthest point of the D* path between ``MinLookahead`` and
    ``MaxLookahead`` cells along it to which the path runs nearly straight (within half a
-   cell). The vote is
-   published as an ``ArcVote`` (behaviour ``FindPath``), and the D* path as
-   ``PlannedPath`` for displays. A waypoint beyond the map's planning limits is planned
-   to the passable cell nearest it on the limits (the Global Map moves its grid along a
-   mission longer than the grid, decision 0041). With no path (no route, the goal
-   impassable and no free cell within its tolerance, or the vehicle off the map) the vote vetoes
-   every arc, as the seed says, and the ``PlannedPath`` is empty (cost inf), so a display
-   does not keep showing a path FindPath no longer has.
+   cell). The vote is published as an ``ArcVote`` (behaviour ``FindPath``), and the D*
+   path as ``PlannedPath`` for displays. A waypoint beyond the map's planning limits is
+   planned to the passable cell nearest it on the limits (the Global Map moves its grid
+   along a mission longer than the grid, decision 0041). With no path (no route, the
+   goal impassable and no free cell within its tolerance, or the vehicle off the map)
+   the vote vetoes every arc, as the seed says, and the ``PlannedPath`` is empty (cost
+   inf), so a display does not keep showing a path FindPath no longer has.
 """
 
 from __future__ import annotations

@@ -79,9 +79,9 @@ def swing_out(beside: float) -> float:
     the tolerance. (Geometry only: a course the vehicle can drive, so the best is no
     longer.)"""
     side = math.copysign(1.0, beside)
+    turned = np.radians(np.arange(0.0, 360.0, 0.1))
     best = math.inf
     for d in np.arange(0.0, 20.0, 0.01):
-        turned = np.radians(np.arange(0.0, 360.0, 0.1))
         x = side * RADIUS * (1.0 - np.cos(turned))
         y = d + RADIUS * np.sin(turned)
         fx, fy = x + BUMPER * side * np.sin(turned), y + BUMPER * np.cos(turned)
