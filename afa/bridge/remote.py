@@ -117,16 +117,20 @@ class RemoteCall:
                  on_done: Any = None, clock: Any = None,
                  reach: Callable[[float], Awaitable[None]] | None = None) -> None:
         """``clock`` and ``reach``: in lock-step, a reply stamped later than this clock's
-        time waits until ``reach`` (the lock-step's) says the clock is there: the grant
-        of that time may still be on its way. A stamp no grant reaches (a rogue or
+        time is handed over when ``reach`` (the lock-step's) says the clock is there: the
+        grant of that time may still be on its way. A stamp no grant reaches (a rogue or
         broken server's) answers the call with EOutOfBounds rather than holding it."""
         payload = encode_arguments(interface, method, arguments)  # InterfaceError if bad
         loop = asyncio.get_running_loop()
-        self.future: asyncio.Future[Any] = loop.create_future()
-        self._held: asyncio.Task[None] | None = None  # a reply waiting for its time
+        #: the reply as (kind, payload, time stamp), or the error of a call nobody answered
+        self.future: asyncio.Future[tuple[int, bytes, float | None]] = loop.create_future()
+        self._label = f"{robot}/{name}"
+        self._decode = (interface, method)
+        self._clock = clock
+        self._reach = reach
         future = self.future
         replies: list[Any] = []
-        label = f"{robot}/{name}"
+        label = self._label
 
         def settle() -> None:
             if traffic is not None:
@@ -147,36 +151,7 @@ class RemoteCall:
                 return
             attachment = reply.ok.attachment
             kind, when = parse_reply(attachment.to_bytes() if attachment is not None else None)
-            if clock is not None and reach is not None and when is not None \
-                    and when > clock.monotonic():
-                # lock-step: the answer overtook the grant of its time; hold it until then
-                self._held = loop.create_task(hold(when, kind, reply))
-            else:
-                resolve(kind, reply)
-
-        async def hold(when: float, kind: int, reply: Any) -> None:
-            assert reach is not None
-            try:
-                await reach(when)
-            except EOutOfBounds as exc:
-                if not future.done():
-                    future.set_exception(EOutOfBounds(
-                        f"{label}: the reply is stamped t={when!r} s, a time no grant "
-                        f"reaches ({exc})"))
-                return
-            resolve(kind, reply)
-
-        def resolve(kind: int, reply: Any) -> None:
-            if future.done():
-                return
-            try:
-                data = reply.ok.payload.to_bytes()
-                if kind == ERROR:
-                    future.set_exception(decode_error(data))
-                else:
-                    future.set_result(decode_result(interface, method, data))
-            except Exception as exc:  # an undecodable reply: InterfaceError
-                future.set_exception(exc)
+            future.set_result((kind, reply.ok.payload.to_bytes(), when))
 
         def on_reply(reply: Any) -> None:  # Zenoh's thread
             if not replies and traffic is not None:
@@ -202,15 +177,28 @@ class RemoteCall:
                     cancellation_token=self._token)
 
     async def result(self) -> Any:
-        """The reply; cancelling the wait cancels the query."""
+        """The reply; cancelling the wait cancels the query. Raises the afa error the
+        server raised, InterfaceError for a reply that does not decode, and in lock-step
+        EOutOfBounds for a reply stamped at a time no grant reaches."""
         try:
-            return await self.future
+            kind, data, when = await self.future
         except asyncio.CancelledError:
             self._token.cancel()
             raise
         finally:
             if not self.future.done():
                 self.future.cancel()  # whatever arrives later is nobody's business
+        if (self._reach is not None and self._clock is not None and when is not None
+                and when > self._clock.monotonic()):
+            # lock-step: the answer overtook the grant of its time; hand it over then
+            try:
+                await self._reach(when)
+            except EOutOfBounds as exc:
+                raise EOutOfBounds(f"{self._label}: the reply is stamped t={when!r} s, a "
+                                   f"time no grant reaches ({exc})") from None
+        if kind == ERROR:
+            raise decode_error(data)
+        return decode_result(*self._decode, data)
 
 
 class RemoteServant:
