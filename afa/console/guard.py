@@ -32,8 +32,10 @@ __all__ = ["ControlGuard", "parse_address", "is_loopback", "host_name", "TOKEN_H
 
 #: The header the page sends its control token in.
 TOKEN_HEADER = "X-Afa-Control-Token"
+#: A host name (lower case), as ``--console-host-name`` takes it and a ``Host`` holds it.
+_NAME = r"[a-z0-9_.-]+"
 #: A ``Host`` header: a name or an IP address (IPv6 in brackets), perhaps a port.
-_HOST = re.compile(r"(?P<host>\[[0-9a-f:.]+\]|[a-z0-9_.-]+)(?::[0-9]{1,5})?")
+_HOST = re.compile(rf"(?P<host>\[[0-9a-f:.]+\]|{_NAME})(?::[0-9]{{1,5}})?")
 
 Permission = Literal["view", "stop", "replay", "control"]
 
@@ -63,7 +65,7 @@ def host_name(text: str) -> str:
     """A name the console may be reached by (``vehicle.lan``), lower case. Raises
     ValueError for anything else (a port, a path)."""
     name = text.strip().lower()
-    if not re.fullmatch(r"[a-z0-9_.-]+", name):
+    if not re.fullmatch(_NAME, name):
         raise ValueError(f"{text!r} is not a host name (e.g. vehicle.lan, without a port)")
     return name
 
