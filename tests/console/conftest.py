@@ -101,9 +101,20 @@ class ConsolePage:
             if value:
                 return value
             if asyncio.get_running_loop().time() > deadline:
+                last = await self.page.evaluate(
+                    "window.afaConsole ? afaConsole.stats.lastError : 'no console'")
                 raise AssertionError(f"timed out waiting for {what or expression}; page "
-                                     f"errors: {self.errors}")
+                                     f"errors: {self.errors}; last view error: {last}")
             await asyncio.sleep(0.1)
+
+    async def until(self, predicate: Any, what: str, timeout: float = 20.0) -> None:
+        """Poll ``predicate()`` on the server's side until it is true: what the page sends
+        (a subscription, say) reaches the server some time after the page has shown it."""
+        deadline = asyncio.get_running_loop().time() + timeout
+        while not predicate():
+            if asyncio.get_running_loop().time() > deadline:
+                raise AssertionError(f"timed out waiting for {what}")
+            await asyncio.sleep(0.05)
 
     async def shot(self, name: str, selector: str | None = None) -> Path:
         path = self.artifacts / f"{name}.png"

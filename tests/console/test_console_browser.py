@@ -151,8 +151,10 @@ async def test_a_simulated_run_in_every_view_and_a_restart_from_the_page(open_co
         # Vehicle & health: VelocityData, the IMU, the arbiter's decisions
         await page.wait("afaConsole.state.vehicle && afaConsole.state.imu", what="vehicle data")
         assert (await page.js("afaConsole.probe('vehicle')"))["variance"] > 100
-        health = await page.page.inner_text("#pane-vehicle")
-        assert "arbiter switch" in health and "Obstacle Detection" in health
+        # the health list is drawn at the view's frame rate: wait for the status rows
+        await page.wait("(t => t.includes('arbiter switch') && t.includes('Obstacle Detection'))"
+                        "(document.getElementById('pane-vehicle').innerText)",
+                        what="the arbiter switch and Obstacle Detection in the health list")
         # the local map shows the arbiter's real decisions (no maps yet on this stack)
         await page.wait("afaConsole.state.decision", what="an ArcDecision")
         assert await page.js("afaConsole.probe('localmap', [255, 225, 77, 25]).matches") > 20
@@ -216,14 +218,17 @@ async def test_the_3d_view_without_webgl_projects_in_2d_and_turns_with_the_mouse
     system = synthetic_system(WallClock())
     console = Console(system, ConsoleOptions(port=0))
     async with console, system:
-        page = await open_console(console.url + "?renderer=2d")
+        # the scene pane alone: no other pane grows above it and moves it under the mouse
+        page = await open_console(console.url + "?renderer=2d&views=scene")
         await page.wait("afaConsole.views.scene.renderer && afaConsole.views.scene.frames.length"
                         " > 20 && afaConsole.views.scene.points().count > 1000",
                         what="frames and laser points")
         assert await page.js("afaConsole.views.scene.renderer.name") == "Canvas 2D projection"
         await page.wait("afaConsole.probe('scene').variance > 30", what="a drawn projection")
         before = await page.js("afaConsole.views.scene.orbit.azimuth")
-        box = await page.page.locator("#pane-scene .canvas-box").bounding_box()
+        canvas = page.page.locator("#pane-scene .canvas-box")
+        await canvas.hover()  # scrolled into view, and still
+        box = await canvas.bounding_box()
         x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
         await page.page.mouse.move(x, y)
         await page.page.mouse.down()
@@ -291,9 +296,10 @@ async def test_replay_controls_and_the_layout(open_console, artifacts):
         order = await page.js("afaConsole.layout.order")
         assert order.index("pose") < order.index("launcher")
         session = next(iter(console.hub.sessions))
-        assert set(session.kinds) == {"status"}  # only the Launcher is on screen
+        # only the Launcher is on screen
+        await page.until(lambda: set(session.kinds) == {"status"}, "a status-only subscription")
         await page.page.click('[data-tab="maps"]')
         await page.wait("!document.getElementById('pane-maps').hidden")
-        assert "map.traverse" in session.kinds
+        await page.until(lambda: "map.traverse" in session.kinds, "the maps' subscription")
         await page.page.select_option("#layout", "grid")
         assert page.foreign == []
