@@ -498,8 +498,8 @@ async def test_a_call_stamped_beyond_every_grant_is_refused_and_holds_nothing(
             errors.append(decode_error(data))
         assert all(isinstance(e, EOutOfBounds) for e in errors[:3]), errors[:3]
         assert all(isinstance(e, EOutOfBounds | EDevIO) for e in errors)  # EDevIO: busy
-        # no place stays held: a plain call is served again (bounded, not at once: the
-        # CI machine once refused the first try, its reason not kept; the next one says)
+        # no place stays held: a plain call is served again (bounded, not at once: on
+        # the CI machine the first try was once refused, for a reason not recorded)
         refusals: list[BaseException] = []
 
         def served() -> bool:
