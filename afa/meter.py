@@ -18,7 +18,7 @@ time that components see. It costs two counter reads and one Python call per tas
 from __future__ import annotations
 
 import time
-from collections.abc import Coroutine, Generator
+from collections.abc import Callable, Coroutine, Generator
 from typing import Any, TypeVar
 
 __all__ = ["LoopMeter"]
@@ -42,25 +42,27 @@ class _Account:
 
 
 class LoopMeter:
-    """Per-owner busy time of the loop (seconds of ``perf_counter``) since creation."""
+    """Per-owner busy time of the loop (seconds of ``timer``, :func:`time.perf_counter`
+    unless given) since creation."""
 
-    def __init__(self) -> None:
+    def __init__(self, timer: Callable[[], float] = time.perf_counter) -> None:
         self._accounts: dict[str, _Account] = {}
-        self._started = time.perf_counter()
+        self._timer = timer
+        self._started = timer()
 
     def wrap(self, coroutine: Coroutine[Any, Any, T], account: str) -> Coroutine[Any, Any, T]:
         """``coroutine``, with the time of each of its steps added to ``account``."""
         entry = self._accounts.get(account)
         if entry is None:
             entry = self._accounts[account] = _Account()
-        return _Metered(coroutine, entry)
+        return _Metered(coroutine, entry, self._timer)
 
     def snapshot(self) -> dict[str, Any]:
         """``{"wall_s": seconds since creation, "accounts": {owner: {"busy_s", "steps",
         "share", "longest_s"}}}`` where ``share`` is busy time over wall time and
         ``longest_s`` the longest single step: the longest the owner held the loop, during
         which no other component (Obstacle Detection included) could run."""
-        wall = max(1e-9, time.perf_counter() - self._started)
+        wall = max(1e-9, self._timer() - self._started)
         return {"wall_s": wall, "accounts": {
             name: {"busy_s": a.busy, "steps": a.steps, "share": a.busy / wall,
                    "longest_s": a.longest}
@@ -70,29 +72,31 @@ class LoopMeter:
 class _Metered(Coroutine[Any, Any, T]):
     """A coroutine that times each step of the one it wraps."""
 
-    __slots__ = ("_inner", "_account")
+    __slots__ = ("_inner", "_account", "_timer")
 
-    def __init__(self, inner: Coroutine[Any, Any, T], account: _Account) -> None:
+    def __init__(self, inner: Coroutine[Any, Any, T], account: _Account,
+                 timer: Callable[[], float]) -> None:
         self._inner = inner
         self._account = account
+        self._timer = timer
 
     def send(self, value: Any) -> Any:
-        account = self._account
-        start = time.perf_counter()
+        account, timer = self._account, self._timer
+        start = timer()
         try:
             return self._inner.send(value)
         finally:
-            account.add(time.perf_counter() - start)
+            account.add(timer() - start)
 
     def throw(self, kind: Any, value: Any = None, traceback: Any = None) -> Any:
-        account = self._account
-        start = time.perf_counter()
+        account, timer = self._account, self._timer
+        start = timer()
         try:
             if value is None and traceback is None:
                 return self._inner.throw(kind)
             return self._inner.throw(kind, value, traceback)  # pragma: no cover - legacy form
         finally:
-            account.add(time.perf_counter() - start)
+            account.add(timer() - start)
 
     def close(self) -> None:
         self._inner.close()

@@ -246,12 +246,13 @@ class System:
     def services(self) -> list[Service]:
         return list(self._services)
 
-    def enable_meter(self) -> LoopMeter:
-        """Turn loop-time accounting on (before start); returns the meter."""
+    def enable_meter(self, meter: LoopMeter | None = None) -> LoopMeter:
+        """Turn loop-time accounting on (before start), with ``meter`` if given (one
+        with its own timer, say); returns the meter."""
         if self.meter is None:
             if self._running:
                 raise ComponentError("turn the meter on before the system starts")
-            self.meter = LoopMeter()
+            self.meter = meter if meter is not None else LoopMeter()
             for component in self.components.values():
                 if component._context is not None:
                     component._context.meter = self.meter

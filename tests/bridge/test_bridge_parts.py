@@ -205,16 +205,28 @@ async def test_a_flood_is_taken_in_parts_and_the_loop_turns_between_them() -> No
 
 
 async def test_the_meter_gives_each_component_its_share_of_the_loop() -> None:
+    # a timer that moves 1 µs each time it is read: each step of a task costs exactly
+    # 1 µs, so every account must hold its own steps' time and nothing else (on the real
+    # clock a descheduled step of the idle component could outweigh 500 short ones)
+    reads = [0]
+
+    def timer() -> float:
+        reads[0] += 1
+        return reads[0] * 1e-6
+
     clock = VirtualClock(start=0.0)
     system = System([CounterServer("busy", period=0.01), CounterServer("idle", served="Other",
                                                                        event="Other",
                                                                        period=1.0)],
-                    clock=clock, meter=True)
+                    clock=clock)
+    meter = system.enable_meter(LoopMeter(timer=timer))
     async with system:
         await clock.advance(5.0)
-        snapshot = system.meter.snapshot()  # type: ignore[union-attr]
+        snapshot = meter.snapshot()
     accounts = snapshot["accounts"]
-    assert accounts["busy"]["steps"] > 10 * accounts["idle"]["steps"]
+    assert accounts["busy"]["steps"] > 10 * accounts["idle"]["steps"] > 0
+    for name in ("busy", "idle"):
+        assert accounts[name]["busy_s"] == pytest.approx(accounts[name]["steps"] * 1e-6)
     assert accounts["busy"]["busy_s"] > accounts["idle"]["busy_s"] > 0
     assert 0 < accounts["busy"]["share"] < 1
     assert system.components["busy"].traffic() == {"in": 0, "out": 500}
