@@ -136,9 +136,11 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
             except (ValueError, TypeError, AttributeError):  # a map without a vehicle pose
                 pass
             else:
-                # the body's discs and a disc's radius beyond them, on every side
+                # StartApron behind the rear axle and either side of the centre line (at
+                # least a disc's radius beyond the body's discs), the body's length ahead
                 self._apron = (x, y, heading, p.StartApron, max(p.DiscOffsets, default=0.0)
-                               + 2.0 * p.VehicleRadius, 2.0 * p.VehicleRadius)
+                               + 2.0 * p.VehicleRadius,
+                               max(p.StartApron, 2.0 * p.VehicleRadius))
         if self._backing is not None and not self._reverse_clear(
                 self._backing[0], (self._backing[1] - self.clock.monotonic())
                 * self.parameters.RecoverSpeed):

@@ -94,9 +94,10 @@ class ArcArbiterParameters(Parameters):
     StartApron: Annotated[float, Field(ge=0, le=20)] = param(
         4.0, unit="m",
         description="afa addition: a back-out may cross unmapped ground this far behind "
-                    "the rear axle where the arbiter first saw the vehicle on a map (2 "
-                    "VehicleRadius either side of its centre line): the vehicle was put there "
-                    "(components/arc_arbiter/recovery.py); 0: only mapped ground")
+                    "the rear axle where the arbiter first saw the vehicle on a map, and "
+                    "this far either side of its centre line (at least 2 VehicleRadius): "
+                    "the vehicle was put there (components/arc_arbiter/recovery.py, "
+                    "decision 0045); 0: only mapped ground")
     MapFrameOffset: float = param(
         2.45, unit="m",
         description="afa addition: how far ahead of the rear axle the Traversability "

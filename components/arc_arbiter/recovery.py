@@ -20,12 +20,14 @@ a map cell is coarser than the body) blocks only if the sweep brings it closer s
 Candidates are tried from the steering
 that turns most towards the preferred arc; when none is clear the vehicle keeps standing.
 
-One exception to "unknown blocks": the *start apron*, a rectangle behind the vehicle where
-the arbiter first saw it on a map (``StartApron`` metres long, two disc radii either side
-of the centre line). The
-vehicle was put there; a vehicle put down facing an obstacle closer than it can turn
-(Obstacle Detection halts it at once) has driven over nothing yet, and without the apron
-it would stand there for ever. Unknown cells in the apron count as ground; hazards there
+One exception to "unknown blocks": the *start apron*, a rectangle around where the
+arbiter first saw the vehicle on a map: from ``StartApron`` metres behind the rear axle to
+the body's front, and ``StartApron`` metres either side of the centre line (at least two
+disc radii; decision 0045). The vehicle was put there; a vehicle put down facing an
+obstacle closer than it can turn (Obstacle Detection halts it at once) has driven over
+nothing yet, and without the apron it would stand there for ever. Turning away takes
+more than one back-out, and the later ones swing the tail sideways, so the apron reaches
+as far to the sides as behind. Unknown cells in the apron count as ground; hazards there
 still block, and so does everything unknown outside it.
 """
 
