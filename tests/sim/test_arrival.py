@@ -11,15 +11,9 @@ rest of the run when only FindPath and the Global Map took the bumper).
 """
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-from afa import VirtualClock
-from components.simulation import RaptorSimulation
-
-ROOT = Path(__file__).resolve().parents[2]
 
 WORLD = """<?xml version="1.0" encoding="UTF-8"?>
 <world name="wall-stop">
@@ -33,11 +27,8 @@ WORLD = """<?xml version="1.0" encoding="UTF-8"?>
 
 
 @pytest.mark.timeout(600)
-async def test_a_waypoint_short_of_a_wall_is_reached_straight_and_the_vehicle_stops(tmp_path):
-    world = tmp_path / "wall-stop.xml"
-    world.write_text(WORLD)
-    simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml", world,
-                                           clock=VirtualClock(), seed=0)
+async def test_a_waypoint_short_of_a_wall_is_reached_straight_and_the_vehicle_stops(simulate):
+    simulation = simulate(WORLD)
     async with simulation:
         assert await simulation.run_mission()
         done = simulation.summary()
@@ -94,7 +85,7 @@ def swing_out(beside: float) -> float:
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize("east", [4.0, -4.0], ids=["right", "left"])
 async def test_a_waypoint_inside_the_turning_circle_is_reached_without_circling_it(
-        tmp_path, east):
+        simulate, east):
     # The waypoint lies 4 m beside the vehicle, inside its turning circle: no arc brings
     # the vehicle within its tolerance, so it must swing out and come back. Each drivable
     # path there ends in a tight turn; while the arbiter took a slightly straighter arc
@@ -102,10 +93,7 @@ async def test_a_waypoint_inside_the_turning_circle_is_reached_without_circling_
     # vehicle slid outside the path at every cycle, passed the waypoint just out of
     # tolerance and circled it: 26.7 m to arrive on the right, against a swing-out of
     # 16.1 m.
-    world = tmp_path / "beside.xml"
-    world.write_text(BESIDE.format(east=east))
-    simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml", world,
-                                           clock=VirtualClock(), seed=0)
+    simulation = simulate(BESIDE.format(east=east))
     async with simulation:
         assert await simulation.run_mission()
         done = simulation.summary()

@@ -9,14 +9,7 @@ start apron only as wide as the body (two disc radii either side) those were blo
 and the vehicle stood there until the mission's time ran out.
 """
 
-from pathlib import Path
-
 import pytest
-
-from afa import VirtualClock
-from components.simulation import RaptorSimulation
-
-ROOT = Path(__file__).resolve().parents[2]
 
 # the rear axle at east -20 heading east: the bumper (2.45 m ahead) at -17.55, the
 # wall's face at -14.98
@@ -33,11 +26,8 @@ WORLD = """<?xml version="1.0" encoding="UTF-8"?>
 
 
 @pytest.mark.timeout(600)
-async def test_a_vehicle_put_down_close_to_a_wall_turns_away_over_its_start_apron(tmp_path):
-    world = tmp_path / "put-down-at-a-wall.xml"
-    world.write_text(WORLD)
-    simulation = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml", world,
-                                           clock=VirtualClock(), seed=0)
+async def test_a_vehicle_put_down_close_to_a_wall_turns_away_over_its_start_apron(simulate):
+    simulation = simulate(WORLD)
     async with simulation:
         await simulation.run_mission()
         summary = {**simulation.summary(), **simulation.course_reference()}
