@@ -13,9 +13,9 @@ RAPTOR = Path(__file__).resolve().parents[2] / "configs" / "raptor.xml"
 
 @pytest.fixture
 def simulate(tmp_path: Path) -> Callable[[str], RaptorSimulation]:
-    """``simulate(xml)``: the shipped configuration on the world ``xml`` (written to a
-    file named after the world), seed 0, in unpaced virtual time; not started (use
-    ``async with``)."""
+    """``simulate(xml)``: the shipped configuration on the world ``xml`` (written to
+    ``world.xml`` in the test's tmp dir), seed 0, in unpaced virtual time; not started
+    (use ``async with``)."""
 
     def build(xml: str) -> RaptorSimulation:
         world = tmp_path / "world.xml"
