@@ -3,6 +3,8 @@ and outcome table.
 
     python docs/make_autonomy_figures.py [WORLD ...] [--seed N] [--jobs N]
 
+A WORLD is a shipped world's name or the path of a world file (``something.xml``).
+
 Each world runs in its own interpreter (``--jobs`` at a time, default 2), in virtual time
 with the whole stack of configs/raptor.xml on emulated devices, as
 ``afa run configs/raptor.xml --sim --world WORLD --fast`` does. Writes
@@ -36,9 +38,12 @@ def drive(world: str, seed: int) -> dict[str, Any]:
     from afa import VirtualClock
     from components.simulation import RaptorSimulation
 
+    path = Path(world) if world.endswith(".xml") else \
+        ROOT / "configs" / "worlds" / f"{world}.xml"
+    world = path.stem
+
     async def run() -> tuple[RaptorSimulation, dict[str, Any]]:
-        sim = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml",
-                                        ROOT / "configs" / "worlds" / f"{world}.xml",
+        sim = RaptorSimulation.from_xml(ROOT / "configs" / "raptor.xml", path,
                                         clock=VirtualClock(), seed=seed)
         async with sim:
             await sim.run_mission()
@@ -90,7 +95,8 @@ def row(s: dict[str, Any]) -> str:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("worlds", nargs="*", help="world names (default: every shipped world)")
+    parser.add_argument("worlds", nargs="*",
+                        help="world names or files (default: every shipped world)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--json", type=Path, help="also write the summaries here")
