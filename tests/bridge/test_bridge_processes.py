@@ -12,8 +12,6 @@ from __future__ import annotations
 import asyncio
 import json
 import struct
-import time
-from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -46,21 +44,7 @@ from tests.bridge.parts import (
     endpoint,
     free_port,
 )
-
-
-async def eventually(condition: Callable[[], Any], timeout: float = 15.0,
-                     what: str | Callable[[], str] = "the condition") -> Any:
-    """Wait until ``condition()`` is truthy (bounded; not a timing assertion). ``what``
-    names it in the failure (a callable: asked then, to say what was seen last)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what() if callable(what) else what} did not hold "
-                                 f"within {timeout} s")
-        await asyncio.sleep(0.02)
+from tests.waiting import eventually
 
 
 def peer_a(port: int, *extra: str) -> Peer:

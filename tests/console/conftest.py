@@ -17,6 +17,8 @@ from urllib.parse import urlsplit
 
 import pytest
 
+from tests.waiting import eventually
+
 #: Flags that work on the project's machines (headless, no sandbox as root, nothing that
 #: calls home) plus software WebGL (SwiftShader) for the 3-D view.
 CHROMIUM_FLAGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic",
@@ -110,11 +112,7 @@ class ConsolePage:
     async def until(self, predicate: Any, what: str, timeout: float = 20.0) -> None:
         """Poll ``predicate()`` on the server's side until it is true: what the page sends
         (a subscription, say) reaches the server some time after the page has shown it."""
-        deadline = asyncio.get_running_loop().time() + timeout
-        while not predicate():
-            if asyncio.get_running_loop().time() > deadline:
-                raise AssertionError(f"timed out waiting for {what}")
-            await asyncio.sleep(0.05)
+        await eventually(predicate, timeout, what, interval=0.05)
 
     async def shot(self, name: str, selector: str | None = None) -> Path:
         path = self.artifacts / f"{name}.png"
