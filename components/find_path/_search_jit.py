@@ -22,9 +22,10 @@ __all__ = ["search_kernel"]
 _F1 = numba.float64[::1]
 _F2 = numba.float64[:, ::1]
 SIGNATURE = numba.types.UniTuple(numba.int64, 3)(
-    _F2, numba.float64, _F2, _F2, numba.float64, numba.float64, numba.float64, _F1, _F1,
-    numba.float64[:, :, ::1], _F1, _F1, numba.float64, numba.float64, numba.float64,
-    numba.float64, numba.float64, numba.int64, numba.int64, _F2, numba.int64[::1], _F1)
+    _F2, numba.float64, _F2, _F2, numba.float64, numba.float64, numba.float64, _F1, _F1, _F1,
+    numba.float64[:, :, ::1], numba.boolean[:, ::1], _F1, _F1, numba.float64, numba.float64,
+    numba.float64, numba.float64, numba.float64, numba.float64, numba.float64, numba.int64,
+    numba.int64, _F2, numba.int64[::1], _F1, _F1)
 
 
 @numba.njit(inline="always")
@@ -58,16 +59,20 @@ def _clearance(distance: np.ndarray, inv: float, ox: float, oy: float, offsets: 
             boundscheck=False)
 def search_kernel(distance: np.ndarray, inv: float, window_cost: np.ndarray,
                   togo: np.ndarray, ox: float, oy: float, g: float, offsets: np.ndarray,
-                  kappas_of_motions: np.ndarray, samples: np.ndarray, start: np.ndarray,
+                  kappas_of_motions: np.ndarray, signs_of_motions: np.ndarray,
+                  samples: np.ndarray, reversible: np.ndarray, start: np.ndarray,
                   target: np.ndarray, kappa_scale: float, tol2: float,
-                  heading_tolerance: float, curvature_change_cost: float, step: float,
+                  heading_tolerance: float, curvature_change_cost: float,
+                  reverse_cost: float, switch_cost: float, step: float,
                   bins: int, max_expansions: int, poses: np.ndarray, parents: np.ndarray,
-                  kappas: np.ndarray) -> tuple[int, int, int]:
+                  kappas: np.ndarray, signs: np.ndarray) -> tuple[int, int, int]:
     """Run the search; ``start`` is (x, y, h, curvature or NaN, need, escape_from,
     escape_rate), ``target`` (x, y, h, has heading, then the arrival region: x, y,
     radius squared (negative for none), ahead, left), ``kappa_scale`` the largest
-    curvature magnitude (the change cost's scale). ``poses`` (n, 3), ``parents`` and
-    ``kappas`` (n) receive the states, n at least ``max_expansions`` × motions + 1.
+    curvature magnitude (the change cost's scale); a motion of sign −1 runs in reverse,
+    costs ``reverse_cost`` times as much, may end only on a ``reversible`` cell, and a
+    change of sign costs ``switch_cost``. ``poses`` (n, 3), ``parents``, ``kappas`` and
+    ``signs`` (n) receive the states, n at least ``max_expansions`` × motions + 1.
     Returns (the goal state's index or -1, expansions, states used)."""
     ni, nj = window_cost.shape
     n_states = ni * nj * bins
@@ -86,6 +91,7 @@ def search_kernel(distance: np.ndarray, inv: float, window_cost: np.ndarray,
     poses[0, 0], poses[0, 1], poses[0, 2] = start[0], start[1], start[2]
     parents[0] = -1
     kappas[0] = start[3]
+    signs[0] = 1.0
     costs[0] = 0.0
     travel[0] = 0.0
     i = int(math.floor((start[0] - ox) / g))
@@ -156,12 +162,17 @@ def search_kernel(distance: np.ndarray, inv: float, window_cost: np.ndarray,
             cj = int(math.floor((ny - oy) / g))
             if not (0 <= ci < ni and 0 <= cj < nj):
                 continue
+            sign = signs_of_motions[m]
             remaining = togo[ci, cj]
-            if not math.isfinite(remaining):
+            if not math.isfinite(remaining) or (sign < 0.0 and not reversible[ci, cj]):
                 continue
             step_cost = step * window_cost[ci, cj]
             if not math.isfinite(step_cost):
                 continue
+            if sign < 0.0:
+                step_cost *= reverse_cost
+            if sign != signs[n]:
+                step_cost += switch_cost
             previous = kappas[n]
             if not math.isnan(previous):
                 step_cost += curvature_change_cost * abs(kappa - previous) / scale
@@ -174,6 +185,7 @@ def search_kernel(distance: np.ndarray, inv: float, window_cost: np.ndarray,
             poses[count, 0], poses[count, 1], poses[count, 2] = nx, ny, nh
             parents[count] = n
             kappas[count] = kappa
+            signs[count] = sign
             costs[count] = total
             travel[count] = travel[n] + step
             # push (total + remaining, count)

@@ -11,13 +11,17 @@ corner asks for a curvature it cannot drive: it overshoots the opening and circl
 
 What
 ----
-:class:`Refiner` searches forward arcs from the vehicle's pose to a *target pose* on the
-D* path a few metres ahead (Hybrid A*, Dolgov et al. 2008: continuous positions, states
-merged by cell and heading bin):
+:class:`Refiner` searches arcs from the vehicle's pose to a *target pose* on the D* path
+a few metres ahead (Hybrid A*, Dolgov et al. 2008: continuous positions, states merged by
+cell and heading bin):
 
 - **Motions**: arcs of length ``step`` with curvatures spread evenly over
   [−κ, +κ] (κ a little under the arc set's κ_max, so the tracker keeps some steering in
-  hand).
+  hand); with ``reverse_cost`` > 0 the same arcs driven backwards too, each metre
+  costing ``reverse_cost`` times as much, each change of direction ``switch_cost`` more,
+  and ending only on ``seen`` cells (no sensor looks behind; decision 0046). The vehicle
+  is taken to be driving forwards at the start, so a path that starts by backing pays
+  one change.
 - **Body**: discs of ``radius`` centred ``offsets`` metres ahead of the rear axle (the
   defaults cover the Raptor's 2.85 m × 1.4 m body: √(0.7² + 0.4²) < 0.81 m with discs
   0.8 m apart), checked every quarter motion: a disc is clear when its centre is farther
@@ -88,22 +92,41 @@ class Refined:
     curvatures: list[float]  # of each motion, len(poses) - 1
     expansions: int
     step: float  # m, the length of each motion
+    #: of each motion: 1 forwards, -1 in reverse (empty: every motion forwards)
+    directions: tuple[int, ...] = ()
+
+    def direction(self, k: int) -> int:
+        return self.directions[k] if self.directions else 1
+
+    def first_leg(self) -> tuple[int, int]:
+        """The direction of the first motion and how many motions in a row share it
+        (the path's first leg, up to its first change of direction)."""
+        n = len(self.curvatures)
+        if n == 0:
+            return 1, 0
+        first = self.direction(0)
+        k = 1
+        while k < n and self.direction(k) == first:
+            k += 1
+        return first, k
 
     def at(self, distance: float) -> tuple[float, float]:
-        """The point ``distance`` metres along the path (on its arcs; the end beyond
-        it)."""
+        """The point ``distance`` metres along the path's first leg (on its arcs; the
+        leg's end beyond it: a point past a change of direction would lie behind)."""
         step = self.step
+        _, leg = self.first_leg()
         k = int(distance // step) if step > 0 else 0
-        if k >= len(self.curvatures):
-            return self.poses[-1][0], self.poses[-1][1]
+        if k >= leg:
+            return self.poses[leg][0], self.poses[leg][1]
         x, y, h = self.poses[k]
-        ax, ay = _arc(self.curvatures[k], distance - k * step)
+        ax, ay = _arc(self.curvatures[k], self.direction(k) * (distance - k * step))
         return (x + ax * math.cos(h) - ay * math.sin(h),
                 y + ax * math.sin(h) + ay * math.cos(h))
 
 
 class Refiner:
-    """Hybrid A* over forward arcs (module docstring). Lengths in metres."""
+    """Hybrid A* over arcs, forwards and (with ``reverse_cost``) backwards (module
+    docstring). Lengths in metres."""
 
     def __init__(self, max_curvature: float, offsets: tuple[float, ...], radius: float,
                  *, hazard_margin: float = 0.0, resolution: float = 0.1,
@@ -111,7 +134,8 @@ class Refiner:
                  max_expansions: int = 12000, window_margin: float | None = None,
                  position_tolerance: float = 0.75, heading_tolerance: float = 0.35,
                  curvature_change_cost: float = 0.5, heuristic_weight: float = 1.0,
-                 escape_rate: float = 0.25) -> None:
+                 escape_rate: float = 0.25, reverse_cost: float = 0.0,
+                 switch_cost: float = 0.0) -> None:
         if not (max_curvature > 0.0 and motions >= 3 and motions % 2 == 1 and step > 0.0):
             raise ValueError("need max_curvature > 0, an odd motions >= 3 and step > 0")
         self.curvatures = tuple(float(k) for k in np.linspace(max_curvature, -max_curvature,
@@ -131,19 +155,24 @@ class Refiner:
         self.curvature_change_cost = float(curvature_change_cost)
         self.heuristic_weight = float(heuristic_weight)
         self.escape_rate = float(escape_rate)
+        self.reverse_cost = float(reverse_cost)
+        self.switch_cost = float(switch_cost)
         # room for a U-turn (two turning radii) and the body beyond it, by default
         self.window_margin = float(window_margin) if window_margin is not None else \
             2.0 / max_curvature + max(self.offsets) + self.radius
         # each motion in the frame of its start pose: (end x, y, heading change) and the
         # middle point, for the collision samples
-        self._motions: list[tuple[float, tuple[tuple[float, float, float], ...]]] = []
-        for k in self.curvatures:
-            samples = tuple((*_arc(k, s), k * s)
-                            for s in (0.25 * self.step, 0.5 * self.step, 0.75 * self.step,
-                                      self.step))
-            self._motions.append((k, samples))
-        self._motion_curvatures = np.array([k for k, _ in self._motions], dtype=np.float64)
-        self._motion_samples = np.array([samples for _, samples in self._motions],
+        # (reverse motions: the same arcs driven backwards, when reverse_cost > 0)
+        self._motions: list[tuple[float, int, tuple[tuple[float, float, float], ...]]] = []
+        for sign in ((1, -1) if self.reverse_cost > 0.0 else (1,)):
+            for k in self.curvatures:
+                samples = tuple((*_arc(k, sign * s), k * sign * s)
+                                for s in (0.25 * self.step, 0.5 * self.step,
+                                          0.75 * self.step, self.step))
+                self._motions.append((k, sign, samples))
+        self._motion_curvatures = np.array([k for k, _, _ in self._motions], dtype=np.float64)
+        self._motion_signs = np.array([d for _, d, _ in self._motions], dtype=np.float64)
+        self._motion_samples = np.array([samples for _, _, samples in self._motions],
                                         dtype=np.float64)
         #: the compiled search (decision 0014), None for the Python loop (its oracle)
         self.kernel = SEARCH_KERNEL
@@ -152,7 +181,8 @@ class Refiner:
              origin: tuple[float, float], gridsize: float, start: Pose,
              target: tuple[float, float, float | None],
              curvature: float | None = None, open_cost: float | None = None,
-             arrival: Arrival | None = None) -> Refined | None:
+             arrival: Arrival | None = None,
+             seen: NDArray[np.bool_] | None = None) -> Refined | None:
         """A drivable path from ``start`` to ``target`` (x, y, heading or None), or None
         when the search finds none within its window and budget.
 
@@ -165,8 +195,9 @@ class Refiner:
         point, where the discs decide what fits), None to keep it closed;
         ``arrival``: (x, y, radius, ahead, left), a waypoint reached when the rear axle or
         the point ``ahead``, ``left`` of it in the vehicle frame comes within ``radius``
-        (tested from the first motion on). Only the search's window of either array is
-        read.
+        (tested from the first motion on); ``seen``: the cells a reverse motion may end
+        on (None: all; no sensor looks behind the vehicle, so a reverse should keep to
+        ground the map has seen). Only the search's window of each array is read.
         """
         g = gridsize
         shape = blocked.shape
@@ -184,6 +215,8 @@ class Refiner:
         if open_cost is not None:
             window_cost = np.where(np.isfinite(window_cost) | blocked[i0:i1, j0:j1],
                                    window_cost, open_cost)
+        reversible = (np.ones(window_cost.shape, dtype=np.bool_) if seen is None
+                      else np.ascontiguousarray(seen[i0:i1, j0:j1], dtype=np.bool_))
         ox, oy = origin[0] + i0 * g, origin[1] + j0 * g
         ni, nj = window_cost.shape
 
@@ -227,7 +260,7 @@ class Refiner:
         if self.kernel is not None:
             return self._search_compiled(distances, fine, window_cost, togo, (ox, oy), g,
                                          start, target, curvature, float(escape_from),
-                                         arrival)
+                                         arrival, reversible)
         table = distances.tolist()  # plain floats index faster than an array
         tx, ty, th = target
         tol2 = self.position_tolerance ** 2
@@ -240,6 +273,7 @@ class Refiner:
         poses: list[Pose] = [start]
         parents: list[int] = [-1]
         kappas: list[float] = [math.nan if curvature is None else float(curvature)]
+        signs: list[int] = [1]  # the vehicle is taken to be driving forwards
         costs: list[float] = [0.0]
         travel: list[float] = [0.0]
         best: dict[tuple[int, int, int], float] = {key(*start): 0.0}
@@ -259,9 +293,10 @@ class Refiner:
                     th is None or abs(_wrap(h - th)) <= self.heading_tolerance) or (
                     n > 0 and arrival is not None and reached(
                         x, y, c, s, arrival[3:], arrival[0], arrival[1], arrival[2])):
-                return self._path(poses, parents, kappas, n, expansions, self.step)
+                return self._path(poses, parents, kappas, signs if self.reverse_cost > 0.0
+                                  else None, n, expansions, self.step)
             required = min(need, escape_from - 0.05 + escape_rate * travel[n])
-            for kappa, samples in self._motions:
+            for kappa, sign, samples in self._motions:
                 ok = True
                 for ax, ay, turn in samples:
                     if body_clearance(x + ax * c - ay * s, y + ax * s + ay * c,
@@ -276,11 +311,15 @@ class Refiner:
                 if here is None:
                     continue
                 remaining = togo[here]
-                if not math.isfinite(remaining):
+                if not math.isfinite(remaining) or (sign < 0 and not reversible[here]):
                     continue
                 step_cost = self.step * float(window_cost[here])
                 if not math.isfinite(step_cost):
                     continue
+                if sign < 0:
+                    step_cost *= self.reverse_cost
+                if sign != signs[n]:
+                    step_cost += self.switch_cost
                 previous = kappas[n]
                 if not math.isnan(previous):
                     step_cost += self.curvature_change_cost * abs(kappa - previous) / \
@@ -293,6 +332,7 @@ class Refiner:
                 poses.append((nx, ny, nh))
                 parents.append(n)
                 kappas.append(kappa)
+                signs.append(sign)
                 costs.append(total)
                 travel.append(travel[n] + self.step)
                 heapq.heappush(frontier, (total + float(remaining), len(poses) - 1))
@@ -302,21 +342,22 @@ class Refiner:
                          window_cost: NDArray[np.float64], togo: NDArray[np.float64],
                          corner: tuple[float, float], g: float, start: Pose,
                          target: tuple[float, float, float | None], curvature: float | None,
-                         escape_from: float, arrival: Arrival | None
-                         ) -> Refined | None:
+                         escape_from: float, arrival: Arrival | None,
+                         reversible: NDArray[np.bool_]) -> Refined | None:
         """:meth:`plan`'s search by the compiled kernel (``components/find_path/
         _search_jit.py``): the same states in the same order, the same path."""
         capacity = self.max_expansions * len(self._motions) + 1
         poses = np.empty((capacity, 3))
         parents = np.empty(capacity, dtype=np.int64)
         kappas = np.empty(capacity)
+        signs = np.empty(capacity)
         th = target[2]
         found, expansions, _ = self.kernel(
             np.ascontiguousarray(distances, dtype=np.float64), 1.0 / (g / fine),
             np.ascontiguousarray(window_cost, dtype=np.float64),
             np.ascontiguousarray(togo, dtype=np.float64), corner[0], corner[1], float(g),
             np.array(sorted(self.offsets, reverse=True), dtype=np.float64),
-            self._motion_curvatures, self._motion_samples,
+            self._motion_curvatures, self._motion_signs, self._motion_samples, reversible,
             np.array([start[0], start[1], start[2],
                       math.nan if curvature is None else float(curvature), self.need,
                       escape_from, self.escape_rate]),
@@ -326,8 +367,8 @@ class Refiner:
                          arrival[4])
                         if arrival is not None else (0.0, 0.0, -1.0, 0.0, 0.0))]),
             self.curvatures[0], self.position_tolerance ** 2, self.heading_tolerance,
-            self.curvature_change_cost, self.step, self.bins, self.max_expansions,
-            poses, parents, kappas)
+            self.curvature_change_cost, self.reverse_cost, self.switch_cost, self.step,
+            self.bins, self.max_expansions, poses, parents, kappas, signs)
         if found < 0:
             return None
         chain: list[int] = []
@@ -338,7 +379,9 @@ class Refiner:
         chain.reverse()
         return Refined([(float(poses[m, 0]), float(poses[m, 1]), float(poses[m, 2]))
                         for m in chain], [float(kappas[m]) for m in chain[1:]],
-                       int(expansions), self.step)
+                       int(expansions), self.step,
+                       tuple(int(signs[m]) for m in chain[1:]) if self.reverse_cost > 0.0
+                       else ())
 
     def _clearance(self, blocked: NDArray[np.bool_], gridsize: float,
                    window: tuple[int, int, int, int]) -> tuple[NDArray[np.float64], int]:
@@ -365,15 +408,15 @@ class Refiner:
         return np.minimum(distance[di:di + shape[0], dj:dj + shape[1]], need + gridsize), fine
 
     @staticmethod
-    def _path(poses: list[Pose], parents: list[int], kappas: list[float], n: int,
-              expansions: int, step: float) -> Refined:
+    def _path(poses: list[Pose], parents: list[int], kappas: list[float],
+              signs: list[int] | None, n: int, expansions: int, step: float) -> Refined:
         chain: list[int] = []
         while n >= 0:
             chain.append(n)
             n = parents[n]
         chain.reverse()
         return Refined([poses[m] for m in chain], [kappas[m] for m in chain[1:]], expansions,
-                       step)
+                       step, () if signs is None else tuple(signs[m] for m in chain[1:]))
 
 
 def _arc(kappa: float, s: float) -> tuple[float, float]:

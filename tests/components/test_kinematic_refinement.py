@@ -206,21 +206,24 @@ def random_scene(rng: np.random.Generator) -> tuple[list[tuple[float, float, flo
 
 @pytest.mark.skipif(Refiner(K_MAX, OFFSETS, RADIUS).kernel is None,
                     reason="no compiled search (numba missing, or AFA_KERNELS=numpy)")
-def test_the_compiled_search_returns_the_python_loops_path_bit_for_bit():
+@pytest.mark.parametrize("reverse", [0.0, 3.0])
+def test_the_compiled_search_returns_the_python_loops_path_bit_for_bit(reverse: float):
     rng = np.random.default_rng(2026)
-    found = missing = 0
+    found = missing = backing = 0
     for _ in range(60):
         walls, start, target, curvature, arrival = random_scene(rng)
         blocked, cost = grids(walls)
+        seen = rng.random(blocked.shape) < 0.8 if reverse else None
         results = []
         for compiled in (True, False):
             refiner = Refiner(0.9 * K_MAX, OFFSETS, RADIUS, hazard_margin=0.5 * CELL,
                               max_expansions=int(rng.integers(200, 3000)) if compiled
-                              else results[0][1])
+                              else results[0][1], reverse_cost=reverse, switch_cost=3.0)
             if not compiled:
                 refiner.kernel = None
             refined = refiner.plan(blocked, cost, ORIGIN, CELL, start, target,
-                                   curvature=curvature, open_cost=6.0, arrival=arrival)
+                                   curvature=curvature, open_cost=6.0, arrival=arrival,
+                                   seen=seen)
             results.append((refined, refiner.max_expansions))
         fast, slow = results[0][0], results[1][0]
         if slow is None:
@@ -232,4 +235,7 @@ def test_the_compiled_search_returns_the_python_loops_path_bit_for_bit():
         assert fast.poses == slow.poses  # exact floats
         assert fast.curvatures == slow.curvatures
         assert fast.expansions == slow.expansions
+        assert fast.directions == slow.directions
+        backing += -1 in fast.directions
     assert found >= 20 and missing >= 5  # both outcomes were exercised
+    assert (backing > 0) == (reverse > 0)
