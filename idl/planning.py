@@ -146,6 +146,16 @@ class ArcVoteIDL(_Struct):
     vote: _ArcFloat = field(unit="1", description="(n,) desirability 0..1")
     certainty: _ArcFloat = field(unit="1", description="(n,) belief in the data 0..1")
     maxSpeed: _ArcFloat = field(unit="m/s", description="(n,) highest acceptable speed ≥ 0")
+    reverse: float = field(
+        0.0, unit="m", ge=0.0, allow_inf_nan=False,
+        description="afa addition: the behaviour asks the vehicle to back this far first, "
+                    "on curvature reverseCurvature (a planned manoeuvre: FindPath's "
+                    "approach to an opening it cannot turn into going forwards); 0 asks "
+                    "nothing. The arbiter backs only over ground its map has seen")
+    reverseCurvature: float = field(
+        0.0, unit="1/m", allow_inf_nan=False,
+        description="afa addition: the curvature of the path backed along (left "
+                    "positive: the rear swings left and the nose turns right)")
 
     @model_validator(mode="after")
     def _check(self) -> ArcVoteIDL:

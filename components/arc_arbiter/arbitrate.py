@@ -231,6 +231,20 @@ class VoteArbiter:
         entry = self._book.get(behaviour)
         return entry.vote if entry is not None else None
 
+    def reverse_request(self) -> tuple[str, float, float, float] | None:
+        """The latest vote in the book that asks the vehicle to back first
+        (``ArcVoteIDL.reverse`` > 0) from a behaviour with a positive weight: its
+        behaviour, distance (m), curvature (1/m) and receive time; None when none asks.
+        (A behaviour without a say in steering has none in backing either.) Call after
+        :meth:`decide`, which drops the stale votes."""
+        asks = [(e.received, b, e.vote) for b, e in self._book.items()
+                if e.vote.reverse > 0.0
+                and weight_for(b, self.parameters, self.unknown_weight) > 0.0]
+        if not asks:
+            return None
+        received, behaviour, vote = max(asks, key=lambda a: (a[0], a[1]))
+        return behaviour, float(vote.reverse), float(vote.reverseCurvature), received
+
     def expires(self) -> float | None:
         """The earliest time (s, the clock of :meth:`receive`) at which :meth:`decide`
         finds a vote of the book stale; None when the book is empty."""

@@ -26,6 +26,15 @@ the votes stay vetoed, FindPath has no path at all) it stands, unhealthy, until 
 decision lets the vehicle drive again: nothing looks behind the vehicle, and a dead end
 that backing out has not opened is not opened by more of it.
 
+Planned reverse (afa addition, decision 0046): a behaviour with a weight may ask in its
+vote to back first (``ArcVoteIDL.reverse`` metres on ``reverseCurvature``: FindPath's
+drivable path starts by backing, to line up on a gate it is too close to turn into).
+The arbiter backs once per request, on the arc nearest that curvature, at most
+``RecoverDistance`` at ``RecoverSpeed`` and ``RecoverLimit`` times in a row
+(``REVERSE_RESET`` seconds without a request start a new row), and only where the back
+is clear on its map, as for a back-out; any fail-safe stops it, as it stops a back-out.
+A request voted while backing is not taken: it was planned from somewhere along the way.
+
 Commands go out when the decision changes and at least every ``COMMAND_REFRESH`` seconds
 (feeding Vehicle Control's watchdog). Deciding never waits for Vehicle Control: a sender
 task makes the ``setVelocity`` calls one at a time, always with the latest decision
@@ -40,6 +49,7 @@ the console and the logs, when it changes and at least every ``COMMAND_REFRESH``
 from __future__ import annotations
 
 import asyncio
+import math
 from typing import Any
 
 import numpy as np
@@ -61,6 +71,9 @@ STALE_CHECK_PERIOD = 0.1
 #: A command (and a decision event) goes out at least this often (s): below Vehicle
 #: Control's 0.5 s command watchdog.
 COMMAND_REFRESH = 0.2
+#: Planned reverses (decision 0046) count in a row, up to ``RecoverLimit``, until one is
+#: asked for this long (s) after the last one ended.
+REVERSE_RESET = 15.0
 
 
 class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
@@ -78,6 +91,9 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._vetoed_since: float | None = None  # every arc vetoed since then
         self._backing: tuple[int, float] | None = None  # arc index, reverse until
         self._backouts_in_row = 0  # since the last decision that let the vehicle drive
+        self._reverse_seen = -math.inf  # receive time of the last reverse request handled
+        self._reverse_ended = -math.inf  # when the last back (of either kind) ended
+        self._reverses_in_row = 0
         self.control = self.uses(VehicleControl, p.VehicleControlName)
         self.arcs = ArcSet.from_parameters()
         self.book = VoteArbiter(p, self.arcs, required=p.RequiredBehaviours)
@@ -91,7 +107,8 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._busy = False  # the sender's call is waiting for Vehicle Control
         self.counters = {"votes": 0, "decisions": 0, "commands": 0, "command_errors": 0,
                          "failsafe_stops": 0, "rejected_votes": 0, "backouts": 0,
-                         "backouts_blocked": 0, "backouts_refused": 0}
+                         "backouts_blocked": 0, "backouts_refused": 0, "reverses": 0,
+                         "reverses_blocked": 0, "reverses_refused": 0}
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
@@ -103,7 +120,8 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         self._map = None
         self._apron = None
         self._vetoed_since = self._backing = None
-        self._backouts_in_row = 0
+        self._backouts_in_row = self._reverses_in_row = 0
+        self._reverse_seen = self._reverse_ended = -math.inf
 
     async def run(self) -> None:
         self.spawn(self._sender(), f"{self.name}:sender")
@@ -168,6 +186,7 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
         p = self.parameters
         if p.RecoverAfter <= 0:
             return decision
+        self._planned_reverse(decision, now)
         if decision.failsafe is None and self._backouts_in_row:
             self._backouts_in_row = 0  # the votes let the vehicle drive again
             if self._health_detail.startswith("standing:"):
@@ -182,6 +201,8 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
             self._vetoed_since = now
         if self._backing is not None and now >= self._backing[1] - TIME_TOLERANCE:
             self._backing = None
+            # a request voted while backing was planned from somewhere along the way
+            self._reverse_seen = self._reverse_ended = now
             self._vetoed_since = None if decision.failsafe is None else now
         if self._backing is None and self._vetoed_since is not None \
                 and now - self._vetoed_since >= p.RecoverAfter - TIME_TOLERANCE:
@@ -213,6 +234,34 @@ class ArcArbiter(SubscribePublishServer[ArcArbiterParameters]):
                                self.arcs.steering_angle(index), -p.RecoverSpeed,
                                decision.scores, decision.vetoed, decision.fresh,
                                decision.stale, decision.unknown, None)
+
+    def _planned_reverse(self, decision: ArbiterDecision, now: float) -> None:
+        """Start the back a behaviour's fresh vote asks for (``ArcVoteIDL.reverse``,
+        decision 0046: FindPath's way on starts by backing), once per request, on the
+        arc nearest its curvature, at most ``RecoverDistance`` and ``RecoverLimit`` in
+        a row, and only where it is clear on the map, as for a back-out."""
+        p = self.parameters
+        if self._backing is not None or decision.failsafe not in (None, "all-vetoed"):
+            return
+        request = self.book.reverse_request()
+        if request is None or request[3] <= self._reverse_seen:
+            return
+        behaviour, distance, curvature, self._reverse_seen = request
+        if now - self._reverse_ended > REVERSE_RESET:
+            self._reverses_in_row = 0
+        if p.RecoverLimit and self._reverses_in_row >= p.RecoverLimit:
+            self.counters["reverses_refused"] += 1
+            return
+        index = int(np.argmin(np.abs(self.arcs.curvatures - curvature)))
+        distance = min(distance, p.RecoverDistance)
+        if not self._reverse_clear(index, distance):
+            self.counters["reverses_blocked"] += 1
+            return
+        self._backing = (index, now + distance / p.RecoverSpeed)
+        self._reverses_in_row += 1
+        self.counters["reverses"] += 1
+        self.log.info("%s asks to back %.1f m on curvature %.3f: backing",
+                      behaviour, distance, float(self.arcs.curvatures[index]))
 
     def _decide(self) -> None:
         now = self.clock.monotonic()
