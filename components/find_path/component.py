@@ -22,15 +22,19 @@ runs one cycle every ``PlanEventInterval`` seconds:
    scratch, as the seed's "forced to re-plan". The path followed is the rest of the last
    one while that is passable and not clearly dearer than the new plan (hysteresis:
    two ways round an obstacle that cost nearly the same do not alternate, decision 0043);
-5. a drivable path (:mod:`components.find_path.kinematic`, decision 0024): forward arcs
-   within the arc set's curvature, the body as discs, from the vehicle to the D* path's
+5. a drivable path (:mod:`components.find_path.kinematic`, decision 0024): arcs within
+   the arc set's curvature, the body as discs, from the vehicle to the D* path's
    point ``RefineDistance`` ahead (where that is the waypoint, a path ends with the rear
    axle near it, or with the ground under the bumper, ``GroundFrame`` from ModelServer,
    where the rear axle cannot come: the Global Map's arrival rule, decision 0042); the
    vote is a narrow Gaussian around the curvature that reaches its point 1.5 m ahead
-   (κ = 2y/D²), narrower still on the final approach (decision 0044). When there is
-   none (the vehicle stands where no forward path leads onto the plan) every arc is
-   vetoed and the arbiter backs out. With refinement off (``RefineDistance`` 0) the
+   (κ = 2y/D²), narrower still on the final approach (decision 0044). The path may
+   back (``ReverseCost``, over ground the map has seen, decision 0046): one that starts
+   by backing, a vehicle beside a gate it cannot turn into going forwards, puts that
+   leg in the vote (``ArcVoteIDL.reverse``) for the arbiter, and the vote's arcs follow
+   the best forward-only path meanwhile. When there is no forward path (the vehicle
+   stands where none leads onto the plan) every arc is vetoed and the arbiter backs
+   out. With refinement off (``RefineDistance`` 0) the
    look-ahead point is the farthest point of the D* path between ``MinLookahead`` and
    ``MaxLookahead`` cells along it to which the path runs nearly straight (within half a
    cell). The vote is published as an ``ArcVote`` (behaviour ``FindPath``), and the D*
@@ -234,6 +238,9 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         self.platform = self.uses(Platform, p.PlatformName)
         self.arcs = ArcSet.from_parameters()
         self._refiner: Refiner | None = None
+        self._forward: Refiner | None = None  # forward arcs only, when _refiner backs too
+        #: the back the last drivable path starts with: (m, curvature), None for none
+        self.reverse: tuple[float, float] | None = None
         self._steering: float | None = None  # the curvature of the last drivable vote
         self.grid: CostGrid | None = None
         self.planner: DStarLite | None = None
@@ -246,7 +253,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
                          "prior_changes": 0,
                          "no_path": 0, "cells_updated": 0, "poll_errors": 0,
                          "refined": 0, "undrivable": 0, "invalid_poses": 0,
-                         "unknown_frames": 0, "bumper_arrivals": 0, "held_paths": 0}
+                         "unknown_frames": 0, "bumper_arrivals": 0, "held_paths": 0,
+                         "reverse_requests": 0}
         self._no_path_streak = 0  # planning cycles in a row that found no path
         self._no_path_since = 0.0  # when the streak began (clock time)
         self.beyond = False  # the waypoint lies beyond the planning limits
@@ -257,7 +265,8 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
 
     async def setup(self) -> None:
         self.arcs = arc_set_of(self.context.section(ARC_SET_SECTION))
-        self._refiner = None
+        self._refiner = self._forward = None
+        self.reverse = None
         self._steering = None
         self.grid = self.planner = None
         self.goal = None
@@ -341,7 +350,11 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
                          gaussian_votes(self.arcs.curvatures, kappa, sigma), np.ones(n),
                          np.full(n, 2.0))
         stamp = TimeIDL.from_seconds(self.clock.now())
-        self.votes.publish(votes.to_idl(time=stamp, behaviour=BEHAVIOUR, arcs=self.arcs))
+        body = votes.to_idl(time=stamp, behaviour=BEHAVIOUR, arcs=self.arcs)
+        if self.reverse is not None:
+            body = body.model_copy(update={"reverse": self.reverse[0],
+                                           "reverseCurvature": self.reverse[1]})
+        self.votes.publish(body)
         centres = np.array([grid.centre(c) for c in self.path], dtype=np.float64)
         self.paths.publish(PlannedPathIDL(time=stamp, points=centres.reshape(-1, 2),
                                           initialUTM=grid.initial_utm,
@@ -458,6 +471,7 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
         ends at the waypoint); (None, False, False) when refinement is off or the path
         is a single cell."""
         p = self.parameters
+        self.reverse = None
         if p.RefineDistance <= 0.0 or len(self.path) < 2:
             return None, False, False
         centres = [grid.centre(c) for c in self.path]
@@ -466,23 +480,43 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             travelled += math.dist(centres[k], centres[k + 1])
             k += 1
         if self._refiner is None:
-            self._refiner = Refiner(0.9 * self.arcs.max_curvature, tuple(p.DiscOffsets),
-                                    p.DiscRadius, hazard_margin=0.5 * grid.gridsize)
+            def refiner(reverse: float) -> Refiner:
+                return Refiner(0.9 * self.arcs.max_curvature, tuple(p.DiscOffsets),
+                               p.DiscRadius, hazard_margin=0.5 * grid.gridsize,
+                               reverse_cost=reverse, switch_cost=p.ReverseSwitchCost)
+            self._refiner = refiner(p.ReverseCost)
+            self._forward = refiner(0.0) if p.ReverseCost > 0.0 else self._refiner
+        seen = ~grid.unknown if p.ReverseCost > 0.0 else None
+
         # The body discs keep the refined path clear; the cells D* leaves out for the
         # rear axle (within InflationRadius) are open to it at twice the margin's cost,
         # so it may pass closer than D* would, where the body fits (a slalom's gap).
-        def search(arrival: Arrival | None) -> Refined | None:
-            assert self._refiner is not None
-            return self._refiner.plan(grid.blocked, grid.cost, grid.origin, grid.gridsize,
-                                      pose, (*centres[k], None), curvature=self._steering,
-                                      open_cost=2.0 * p.MarginCost, arrival=arrival)
+        def searcher(refiner: Refiner) -> Callable[[Arrival | None], Refined | None]:
+            def search(arrival: Arrival | None) -> Refined | None:
+                return refiner.plan(grid.blocked, grid.cost, grid.origin, grid.gridsize,
+                                    pose, (*centres[k], None), curvature=self._steering,
+                                    open_cost=2.0 * p.MarginCost, arrival=arrival,
+                                    seen=seen)
+            return search
 
         arriving = not (k + 1 < len(centres) or self.beyond or self.waypoint is None)
-        if arriving:
-            assert self.waypoint is not None
-            refined = self._to_waypoint(search, *self.waypoint)
-        else:
-            refined = search(None)
+
+        def refine(refiner: Refiner) -> Refined | None:
+            if arriving:
+                assert self.waypoint is not None
+                return self._to_waypoint(searcher(refiner), *self.waypoint)
+            return searcher(refiner)(None)
+
+        refined = refine(self._refiner)
+        if refined is not None and refined.first_leg()[0] < 0:
+            # the way on starts by backing (decision 0046): ask the arbiter for that leg,
+            # and vote for the best forward way meanwhile (the arbiter may refuse)
+            _, leg = refined.first_leg()
+            self.reverse = (leg * refined.step,
+                            float(np.mean(refined.curvatures[:leg])))
+            self.counters["reverse_requests"] += 1
+            assert self._forward is not None
+            refined = refine(self._forward)
         self.counters["refined" if refined is not None else "undrivable"] += 1
         return refined, refined is None, arriving
 

@@ -68,8 +68,8 @@ class FindPathParameters(Parameters):
         3.0, unit="1", description="afa addition: the least cost of a margin cell")
     RefineDistance: Annotated[float, Field(ge=0)] = param(
         10.0, unit="m",
-        description="afa addition: FindPath tracks a drivable path (forward arcs within "
-                    "the arc set's curvature, the body as discs) to the point of the D* "
+        description="afa addition: FindPath tracks a drivable path (arcs within the arc "
+                    "set's curvature, the body as discs) to the point of the D* "
                     "path this far ahead, rather than the D* path itself, where one is "
                     "found (docs/decisions/0024-kinematic-refinement.md); 0 tracks the "
                     "D* path")
@@ -90,6 +90,17 @@ class FindPathParameters(Parameters):
         description="afa addition: the radius of the refinement's body discs: with discs "
                     "0.8 m apart over the Raptor's 1.4 m width, sqrt(0.7^2 + 0.4^2) covers "
                     "the whole body")
+    ReverseCost: Annotated[float, Field(ge=0)] = param(
+        3.0, unit="1",
+        description="afa addition: the drivable path may also back (the same arcs in "
+                    "reverse, over ground the map has seen), each metre costing this "
+                    "many times a metre forwards; a path that starts backing asks the "
+                    "arbiter to back first (docs/decisions/0046-planned-reverse.md). 0 "
+                    "plans forward arcs only")
+    ReverseSwitchCost: Annotated[float, Field(ge=0)] = param(
+        3.0, unit="m",
+        description="afa addition: what each change between forwards and reverse adds "
+                    "to a drivable path's cost, in metres of cost-1 ground")
 
     @model_validator(mode="after")
     def _lookahead_range(self) -> FindPathParameters:

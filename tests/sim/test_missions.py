@@ -43,10 +43,14 @@ async def drive(world: Path, seed: int = 0) -> dict:
 #: Worlds the Raptor does not yet complete within the acceptance, and why
 #: (docs/autonomy.md): expected to fail, so that a fix shows as an unexpected pass.
 KNOWN_FAILURES = {
-    "narrow-gate": "completes, but drives 2.08x the oracle's course: the gate lies beyond "
+    "narrow-gate": "completes, but drives 1.37x the oracle's course: the gate lies beyond "
                    "the lasers' reach when FindPath must choose an end of the wall, so under "
                    "the freespace assumption it goes round the unseen south end first and "
                    "finds the gate on the way back",
+    "ditch-crossing": "completes, but drives 1.45x the oracle's course: the ditch's nearer "
+                      "end lies beyond the lasers' reach when FindPath must choose one, and "
+                      "the plan switches ends; the vehicle, able to back (decision 0046), "
+                      "follows the switch at once (1.06x at seed 1)",
 }
 
 
