@@ -66,15 +66,18 @@ def overlaps(points: np.ndarray, walls: list[tuple[float, float, float, float]])
                for x0, x1, y0, y1 in walls)
 
 
-def drive(poses: list[tuple[float, float, float]], curvatures: list[float], step: float
-          ) -> list[tuple[float, float, float]]:
-    """Every 0.05 m along the motions, recomputed from each start pose and curvature; and
+def drive(poses: list[tuple[float, float, float]], curvatures: list[float], step: float,
+          directions: tuple[int, ...] = ()) -> list[tuple[float, float, float]]:
+    """Every 0.05 m along the motions, recomputed from each start pose and curvature, in
+    each motion's direction (1 forwards, -1 backwards; none given: all forwards); and
     check that each motion ends at the next pose."""
     dense = []
     assert len(curvatures) == len(poses) - 1
-    for (x, y, h), k, nxt in zip(poses[:-1], curvatures, poses[1:], strict=True):
+    for m, ((x, y, h), k, nxt) in enumerate(zip(poses[:-1], curvatures, poses[1:],
+                                                strict=True)):
         assert abs(k) <= K_MAX + 1e-12
-        for s in np.append(np.arange(0.0, step, 0.05), step):
+        sign = directions[m] if directions else 1
+        for s in sign * np.append(np.arange(0.0, step, 0.05), step):
             if abs(k) < 1e-12:
                 px, py = x + s * math.cos(h), y + s * math.sin(h)
             else:

@@ -2,9 +2,9 @@
 (components/find_path/kinematic.py) and the Arc Arbiter backing when a vote asks it to
 (ArcVoteIDL.reverse), on the wire.
 
-The refinement's checks are plain geometry, as in test_kinematic_refinement.py: each
-motion is re-driven from its start pose along its arc, forwards or backwards, and the
-Raptor's body rectangle never overlaps a wall.
+The refinement's checks are plain geometry, as in test_kinematic_refinement.py (whose
+``drive`` re-drives each motion from its start pose along its arc, forwards or
+backwards): the Raptor's body rectangle never overlaps a wall.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from test_kinematic_refinement import (
     ORIGIN,
     RADIUS,
     body_points,
+    drive,
     grids,
     overlaps,
     walls_with_gate,
@@ -32,24 +33,7 @@ from components.find_path.kinematic import Refined, Refiner
 
 
 def redrive(refined: Refined) -> list[tuple[float, float, float]]:
-    """Every 0.05 m along the motions, each re-driven from its start pose on its arc in
-    its direction; checks that each ends at the next pose."""
-    dense = []
-    for m, ((x, y, h), k, nxt) in enumerate(zip(refined.poses[:-1], refined.curvatures,
-                                              refined.poses[1:], strict=True)):
-        assert abs(k) <= K_MAX + 1e-12
-        sign = refined.direction(m)
-        for s in sign * np.append(np.arange(0.0, refined.step, 0.05), refined.step):
-            if abs(k) < 1e-12:
-                px, py = x + s * math.cos(h), y + s * math.sin(h)
-            else:
-                px = x + (math.sin(h + k * s) - math.sin(h)) / k
-                py = y - (math.cos(h + k * s) - math.cos(h)) / k
-            dense.append((px, py, h + k * s))
-        end = dense[-1]
-        assert math.hypot(end[0] - nxt[0], end[1] - nxt[1]) < 1e-9
-        assert abs(math.remainder(end[2] - nxt[2], 2 * math.pi)) < 1e-9
-    return dense
+    return drive(refined.poses, refined.curvatures, refined.step, refined.directions)
 
 
 def refiner(reverse: float) -> Refiner:
