@@ -27,7 +27,10 @@ budget (docs/decisions/0016-dstar-fallback.md).
 Section ``refine``: FindPath's kinematic refinement (Hybrid A* over forward arcs,
 decision 0024) into a 3 m gate in a wall, from five approaches (along the wall, square to
 it, from the far side of the gate), each query timed with the compiled search and with
-the Python loop it compiles (decision 0028), interleaved; they return the same path.
+the Python loop it compiles (decision 0028), interleaved; they return the same path. A
+third contender is the compiled search with reverse motions too, as FindPath runs it
+(``ReverseCost`` 3, ``ReverseSwitchCost`` 3, decision 0046): its expansions, time, and
+whether its path backs.
 
 Usage: ``python benchmarks/planning.py [--sections dstar fallback refine] [--trials N]
 [--seed S] [--cpu]``
@@ -367,24 +370,31 @@ def refine_section(args: argparse.Namespace) -> None:
     slow = Refiner(0.9 * max_curvature(30.0, 1.9), (0.0, 0.8, 1.6, 2.4), 0.81,
                    hazard_margin=0.25)
     slow.kernel = None
+    backing = Refiner(0.9 * max_curvature(30.0, 1.9), (0.0, 0.8, 1.6, 2.4), 0.81,
+                      hazard_margin=0.25, reverse_cost=3.0, switch_cost=3.0)
     print("\nKinematic refinement into a 3 m gate (target 4 m beyond it), per query")
     if fast.kernel is None:
         print("  no compiled search here (numba missing, or AFA_KERNELS=numpy)")
         return
-    print("  approach          expansions   compiled    Python   ratio")
+    print("  approach          expansions   compiled    Python   ratio | with backing: "
+          "expansions  compiled  backs")
     for name, start in starts.items():
-        times: dict[str, list[float]] = {"fast": [], "slow": []}
-        expansions = 0
+        times: dict[str, list[float]] = {"fast": [], "slow": [], "back": []}
+        expansions: dict[str, int] = {}
+        backs = False
         for _ in range(max(3, args.trials)):
-            for key, refiner in (("fast", fast), ("slow", slow)):
+            for key, refiner in (("fast", fast), ("back", backing), ("slow", slow)):
                 t0 = now()
                 refined = refiner.plan(blocked, cost, (-20.0, -20.0), 0.5, start,
                                        (4.0, 9.5, 0.0))
                 times[key].append(now() - t0)
-                expansions = refined.expansions if refined is not None else -1
-        f, s = median(times["fast"]), median(times["slow"])
-        print(f"  {name:16s}  {expansions:10d}  {f * 1e3:7.2f} ms {s * 1e3:7.1f} ms "
-              f"{s / f:6.1f}x")
+                expansions[key] = refined.expansions if refined is not None else -1
+                if key == "back":
+                    backs = refined is not None and -1 in refined.directions
+        f, s, b = median(times["fast"]), median(times["slow"]), median(times["back"])
+        print(f"  {name:16s}  {expansions['fast']:10d}  {f * 1e3:7.2f} ms {s * 1e3:7.1f} ms "
+              f"{s / f:6.1f}x | {expansions['back']:24d}  {b * 1e3:5.2f} ms  "
+              f"{'yes' if backs else 'no'}")
 
 
 SECTIONS: dict[str, Callable[[argparse.Namespace], None]] = {
