@@ -508,10 +508,10 @@ class FindPath(SubscribePublishServer[FindPathParameters]):
             return searcher(refiner)(None)
 
         refined = refine(self._refiner)
-        if refined is not None and refined.first_leg()[0] < 0:
+        sign, leg = refined.first_leg() if refined is not None else (1, 0)
+        if refined is not None and sign < 0:
             # the way on starts by backing (decision 0046): ask the arbiter for that leg,
             # and vote for the best forward way meanwhile (the arbiter may refuse)
-            _, leg = refined.first_leg()
             self.reverse = (leg * refined.step,
                             float(np.mean(refined.curvatures[:leg])))
             self.counters["reverse_requests"] += 1
