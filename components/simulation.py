@@ -543,9 +543,9 @@ class RaptorSimulation:
             # the new state's frame poses: one dict for frame_pose and frame_pose_at
             self._poses_of, self._poses = self.state, {}
             self._history.append((self.clock.monotonic(), self.state, self._poses))
-            if self.state.distance >= self._track_next:
+            if self.state.travelled >= self._track_next:
                 self.track.append((self.state.east, self.state.north))
-                self._track_next = self.state.distance + TRACK_STEP
+                self._track_next = self.state.travelled + TRACK_STEP
             collision = self.vehicle.collision
             if collision is not None and before is None:
                 record = {"time": round(self.sim_time, 3), "east": round(collision.east, 3),
@@ -573,7 +573,7 @@ class RaptorSimulation:
             self._next_waypoint += 1
             if self.waypoints_reached == len(waypoints):  # the course (one lap) is done
                 self.mission_complete_time = self.sim_time
-                self.mission_distance = self.state.distance
+                self.mission_distance = self.state.travelled  # backing counts too
             if patrol:
                 self._next_waypoint %= len(waypoints)
             if self.waypoints_reached == len(waypoints) + (1 if patrol else 0):
@@ -794,7 +794,7 @@ class RaptorSimulation:
             "world": self.world.name,
             "seed": self.seed,
             "mode": "teleop" if self.teleop else "autonomous",
-            "distance_m": round(self.state.distance, 3),
+            "distance_m": round(self.state.travelled, 3),
             "collisions": list(self.collisions),
             "clearance_m": None if math.isinf(self.clearance) else round(self.clearance, 3),
             "waypoints_reached": self.waypoints_reached,

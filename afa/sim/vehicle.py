@@ -91,8 +91,10 @@ class VehicleState:
     """Ground truth at ``time`` (s): pose of the rear axle centre and its rates.
 
     Angles in radians unless the name says ``_deg``; see the module doc for signs.
-    Wheel distances are cumulative signed path lengths of each wheel's contact point on
-    its own arc (m), what wheel encoders integrate.
+    ``distance`` and the wheel distances are cumulative *signed* path lengths (m) of the
+    rear axle centre and of each wheel's contact point on its own arc, what wheel
+    encoders integrate: backing counts down. ``travelled`` is the rear axle centre's
+    path length with backing counted too, the distance the vehicle drove.
     """
 
     time: float = 0.0
@@ -112,6 +114,7 @@ class VehicleState:
     vertical_velocity: float = 0.0
     vertical_acceleration: float = 0.0
     distance: float = 0.0
+    travelled: float = 0.0
     front_left_distance: float = 0.0
     front_right_distance: float = 0.0
     rear_left_distance: float = 0.0
@@ -332,7 +335,7 @@ class Vehicle:
             longitudinal_acceleration=(v1 - s0.speed) / h,
             lateral_acceleration=v1 * turn / h,
             vertical_velocity=vz, vertical_acceleration=(vz - s0.vertical_velocity) / h,
-            distance=s0.distance + travel,
+            distance=s0.distance + travel, travelled=s0.travelled + abs(travel),
             front_left_distance=s0.front_left_distance + fl,
             front_right_distance=s0.front_right_distance + fr,
             rear_left_distance=s0.rear_left_distance + rl,

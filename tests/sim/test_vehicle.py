@@ -61,6 +61,23 @@ def test_straight_line() -> None:
     assert s.rear_right_distance == pytest.approx(10.0, abs=1e-9)
 
 
+def test_backing_counts_down_the_odometer_but_adds_to_the_distance_driven() -> None:
+    # 10 s forwards at 1 m/s, then as long backwards: the encoders' signed distance
+    # returns to about 0, the distance driven (what a mission's path ratio counts) is
+    # about 20 m
+    vehicle = Vehicle()
+    vehicle.reset(0.0, 0.0, 90.0)
+    for speed in (1.0, -1.0):
+        for _ in range(200):
+            vehicle.step(0.05, speed, 0.0)
+        for _ in range(100):  # come to rest
+            vehicle.step(0.05, 0.0, 0.0)
+    s = vehicle.state
+    assert abs(s.east) < 0.05 and s.speed == 0.0
+    assert abs(s.distance) < 0.05
+    assert s.travelled == pytest.approx(20.0, rel=0.02)
+
+
 def test_wheel_distances_on_an_arc() -> None:
     steer, v, t = 20.0, 1.5, 4.0
     vehicle = Vehicle()
