@@ -29,8 +29,8 @@ decision 0024) into a 3 m gate in a wall, from five approaches (along the wall, 
 it, from the far side of the gate), each query timed with the compiled search and with
 the Python loop it compiles (decision 0028), interleaved; they return the same path. A
 third contender is the compiled search with reverse motions too, as FindPath runs it
-(``ReverseCost`` 3, ``ReverseSwitchCost`` 3, decision 0046): its expansions, time, and
-whether its path backs.
+(FindPath's ``ReverseCost`` and ``ReverseSwitchCost``, decision 0046): its expansions,
+time, and whether its path backs.
 
 Usage: ``python benchmarks/planning.py [--sections dstar fallback refine] [--trials N]
 [--seed S] [--cpu]``
@@ -359,6 +359,7 @@ def gate_scene(cell: float = 0.5, cells: int = 80) -> tuple[np.ndarray, np.ndarr
 def refine_section(args: argparse.Namespace) -> None:
     from components.arcs import max_curvature
     from components.find_path.kinematic import Refiner
+    from components.find_path.parameters import FindPathParameters
 
     blocked, cost = gate_scene()
     starts = {"along the wall": (-3.0, -2.0, math.pi / 2),
@@ -370,8 +371,10 @@ def refine_section(args: argparse.Namespace) -> None:
     slow = Refiner(0.9 * max_curvature(30.0, 1.9), (0.0, 0.8, 1.6, 2.4), 0.81,
                    hazard_margin=0.25)
     slow.kernel = None
+    shipped = FindPathParameters()
     backing = Refiner(0.9 * max_curvature(30.0, 1.9), (0.0, 0.8, 1.6, 2.4), 0.81,
-                      hazard_margin=0.25, reverse_cost=3.0, switch_cost=3.0)
+                      hazard_margin=0.25, reverse_cost=shipped.ReverseCost,
+                      switch_cost=shipped.ReverseSwitchCost)
     print("\nKinematic refinement into a 3 m gate (target 4 m beyond it), per query")
     if fast.kernel is None:
         print("  no compiled search here (numba missing, or AFA_KERNELS=numpy)")

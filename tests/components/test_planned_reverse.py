@@ -30,15 +30,19 @@ from test_kinematic_refinement import (
 
 from components.arc_arbiter.component import REVERSE_RESET
 from components.find_path.kinematic import Refined, Refiner
+from components.find_path.parameters import FindPathParameters
+
+#: FindPath's own costs of backing (configs/raptor.xml sets the same).
+SHIPPED = FindPathParameters()
 
 
 def redrive(refined: Refined) -> list[tuple[float, float, float]]:
     return drive(refined.poses, refined.curvatures, refined.step, refined.directions)
 
 
-def refiner(reverse: float) -> Refiner:
+def refiner(reverse: float = SHIPPED.ReverseCost) -> Refiner:
     return Refiner(0.9 * K_MAX, OFFSETS, RADIUS, hazard_margin=0.5 * CELL,
-                   reverse_cost=reverse, switch_cost=3.0)
+                   reverse_cost=reverse, switch_cost=SHIPPED.ReverseSwitchCost)
 
 
 def length(refined: Refined) -> float:
@@ -55,7 +59,7 @@ def test_beside_a_gate_the_drivable_path_is_a_three_point_turn_and_far_shorter()
     walls = walls_with_gate(8.0, 11.0)
     blocked, cost = grids(walls)
     forward = refiner(0.0).plan(blocked, cost, ORIGIN, CELL, BESIDE, BEYOND, open_cost=6.0)
-    backing = refiner(3.0).plan(blocked, cost, ORIGIN, CELL, BESIDE, BEYOND, open_cost=6.0)
+    backing = refiner().plan(blocked, cost, ORIGIN, CELL, BESIDE, BEYOND, open_cost=6.0)
     assert forward is not None and backing is not None
     assert forward.directions == ()  # forward arcs only: it loops
     # forwards, back, forwards through the gate: a three-point turn
@@ -73,7 +77,7 @@ def test_no_back_over_ground_the_map_has_not_seen():
     walls = walls_with_gate(8.0, 11.0)
     blocked, cost = grids(walls)
     unseen = np.zeros(blocked.shape, dtype=bool)
-    blind = refiner(3.0).plan(blocked, cost, ORIGIN, CELL, BESIDE, BEYOND, open_cost=6.0,
+    blind = refiner().plan(blocked, cost, ORIGIN, CELL, BESIDE, BEYOND, open_cost=6.0,
                               seen=unseen)
     forward = refiner(0.0).plan(blocked, cost, ORIGIN, CELL, BESIDE, BEYOND, open_cost=6.0)
     assert blind is not None and forward is not None
@@ -88,7 +92,7 @@ def test_in_a_corridor_too_narrow_to_turn_the_way_back_is_backing_all_the_way():
     start, behind = (0.0, 0.0, 0.0), (-8.0, 0.0, None)
     assert refiner(0.0).plan(blocked, cost, ORIGIN, CELL, start, behind,
                              open_cost=6.0) is None
-    back = refiner(3.0).plan(blocked, cost, ORIGIN, CELL, start, behind, open_cost=6.0)
+    back = refiner().plan(blocked, cost, ORIGIN, CELL, start, behind, open_cost=6.0)
     assert back is not None and set(back.directions) == {-1}
     for x, y, h in redrive(back):
         assert not overlaps(body_points(x, y, h), walls)
