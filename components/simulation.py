@@ -847,7 +847,7 @@ class RaptorSimulation:
     def progress(self) -> str:
         s = self.state
         return (f"pos=({s.east:7.1f},{s.north:7.1f}) hdg={s.heading_deg:5.1f} "
-                f"v={s.speed:4.2f} m/s dist={s.distance:6.1f} m collisions={len(self.collisions)}")
+                f"v={s.speed:4.2f} m/s dist={s.travelled:6.1f} m collisions={len(self.collisions)}")
 
 
 def _body_pose(poses: dict[str, np.ndarray], state: VehicleState) -> np.ndarray:

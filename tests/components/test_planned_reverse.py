@@ -78,7 +78,7 @@ def test_no_back_over_ground_the_map_has_not_seen():
     blocked, cost = grids(walls)
     unseen = np.zeros(blocked.shape, dtype=bool)
     blind = refiner().plan(blocked, cost, ORIGIN, CELL, BESIDE, BEYOND, open_cost=6.0,
-                              seen=unseen)
+                           seen=unseen)
     forward = refiner(0.0).plan(blocked, cost, ORIGIN, CELL, BESIDE, BEYOND, open_cost=6.0)
     assert blind is not None and forward is not None
     assert -1 not in blind.directions
